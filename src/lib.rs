@@ -1,0 +1,9 @@
+//! damage-twin: a digital twin of structural damage built with 3D Gaussian splatting.
+//!
+//! Modules follow the pipeline (see docs/ARCHITECTURE.md): `scene` reads and writes inputs,
+//! `splats` is the model, `raster` renders and differentiates it on the CPU, `gpu` does the same
+//! in WGSL, `train` optimises, `damage`/`timeline` use the engine, `synth` makes the demo building.
+
+pub mod damage;
+pub mod scene;
+pub mod splats;

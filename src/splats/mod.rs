@@ -1,0 +1,6 @@
+//! The Gaussian model as a structure of arrays, its activations and spherical harmonics.
+//! Pure data and maths: no I/O (PLY lives in `scene`), no rendering, no optimiser state.
+
+pub mod model;
+
+pub use model::{SplatMeta, Splats};
