@@ -2,5 +2,9 @@
 //! PLY, the twin project file. Knows nothing of rendering or training.
 
 pub mod camera;
+pub mod error;
+pub mod points;
 
 pub use camera::{Camera, Intrinsics};
+pub use error::SceneError;
+pub use points::PointCloud;
