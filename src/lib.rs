@@ -5,5 +5,6 @@
 //! in WGSL, `train` optimises, `damage`/`timeline` use the engine, `synth` makes the demo building.
 
 pub mod damage;
+pub mod metrics;
 pub mod scene;
 pub mod splats;

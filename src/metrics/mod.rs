@@ -1,0 +1,10 @@
+//! Quality and cost measures: PSNR, damage-mask agreement (IoU, precision, recall, F1) and the
+//! process's peak memory. Pure functions over pixel buffers; no rendering here.
+
+pub mod image_quality;
+pub mod mask_agreement;
+pub mod memory;
+
+pub use image_quality::psnr;
+pub use mask_agreement::MaskAgreement;
+pub use memory::peak_rss_mb;
