@@ -1,0 +1,96 @@
+//! A posed image dataset, whatever format it came from: the views (image file, pinhole camera at
+//! the stored resolution, how to undistort), the initial points, where masks live, and the
+//! problems found while reading. Opening reads only metadata; pixels load per view, at a scale.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use serde::Serialize;
+
+use crate::damage::DamageClass;
+use crate::scene::{Camera, Mask, PointCloud, RgbImage};
+
+/// Which reader recognised the dataset.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DatasetFormat {
+    /// A COLMAP sparse model (`sparse/0/` or `sparse/`), binary `.bin` files.
+    ColmapBinary,
+    /// A COLMAP sparse model, text `.txt` files.
+    ColmapText,
+    /// `transforms.json` (nerfstudio / instant-ngp) or NeRF-synthetic `transforms_{train,test}.json`.
+    Transforms,
+}
+
+/// Which role a view has in the dataset as written (NeRF-synthetic has explicit splits; other
+/// formats leave the choice to the held-out rule, e.g. every 8th image).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Split {
+    Train,
+    Test,
+    Unspecified,
+}
+
+/// Radial-tangential lens distortion (OpenCV's k1 k2 p1 p2, COLMAP's SIMPLE_RADIAL and RADIAL
+/// being special cases) of a view whose image must be undistorted to `View::camera` on load.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Distortion {
+    /// Intrinsics of the distorted image as stored.
+    pub fx: f32,
+    pub fy: f32,
+    pub cx: f32,
+    pub cy: f32,
+    pub k1: f32,
+    pub k2: f32,
+    pub p1: f32,
+    pub p2: f32,
+}
+
+/// One posed image.
+#[derive(Clone, Debug, PartialEq)]
+pub struct View {
+    /// The image file name without extension: masks are found by this stem.
+    pub name: String,
+    pub image_path: PathBuf,
+    /// Pinhole camera at the stored image resolution (after undistortion, when `distortion` is set).
+    pub camera: Camera,
+    /// Set when the stored image is distorted and must be remapped to `camera` on load.
+    pub distortion: Option<Distortion>,
+    pub split: Split,
+}
+
+/// An opened dataset: metadata only.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    pub root: PathBuf,
+    pub format: DatasetFormat,
+    /// Registered views (with a pose and an existing image file), in name order.
+    pub views: Vec<View>,
+    /// Image files found on disk (registered or not).
+    pub image_files: usize,
+    /// Distinct cameras (intrinsics entries) in the model.
+    pub camera_count: usize,
+    /// Camera model names as the format spells them (e.g. `PINHOLE`, `OPENCV`), with counts.
+    pub camera_models: BTreeMap<String, usize>,
+    /// Initial points (SfM points, or `ply_file_path` of nerfstudio), if the dataset has any.
+    pub points: Option<PointCloud>,
+    /// `masks/` folder beside the images, when present.
+    pub masks_dir: Option<PathBuf>,
+    /// Mask files found per class.
+    pub mask_counts: BTreeMap<DamageClass, usize>,
+    /// Colour RGBA images are composited on (NeRF-synthetic: white or black).
+    pub background: [f32; 3],
+    /// Problems that did not stop reading (missing files, unregistered images).
+    pub warnings: Vec<String>,
+}
+
+/// One view's pixels at a chosen scale, with its camera scaled to match.
+#[derive(Clone, Debug)]
+pub struct LoadedView {
+    pub name: String,
+    pub camera: Camera,
+    pub image: RgbImage,
+    /// Damage masks present for this view (nearest-neighbour resized to the image).
+    pub masks: BTreeMap<DamageClass, Mask>,
+}

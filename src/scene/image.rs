@@ -1,0 +1,147 @@
+//! In-memory images and masks: the pixel buffers every other module reads. Row-major, top row
+//! first; colour is RGB interleaved `f32` in `[0, 1]` as stored (sRGB values, no linearisation,
+//! as 3DGS trains).
+
+/// An RGB image, `data[(y * width + x) * 3 + c]`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RgbImage {
+    pub width: u32,
+    pub height: u32,
+    pub data: Vec<f32>,
+}
+
+impl RgbImage {
+    /// A `width × height` image filled with one colour.
+    pub fn filled(width: u32, height: u32, colour: [f32; 3]) -> RgbImage {
+        let mut data = Vec::with_capacity(width as usize * height as usize * 3);
+        for _ in 0..width as usize * height as usize {
+            data.extend_from_slice(&colour);
+        }
+        RgbImage {
+            width,
+            height,
+            data,
+        }
+    }
+
+    pub fn pixel_count(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    pub fn pixel(&self, x: u32, y: u32) -> [f32; 3] {
+        let i = (y as usize * self.width as usize + x as usize) * 3;
+        [self.data[i], self.data[i + 1], self.data[i + 2]]
+    }
+
+    /// Converts to 8-bit sRGB for saving (values clamped to `[0, 1]`).
+    pub fn to_rgb8(&self) -> image::RgbImage {
+        let bytes = self
+            .data
+            .iter()
+            .map(|&v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)
+            .collect();
+        image::RgbImage::from_raw(self.width, self.height, bytes)
+            .expect("RgbImage data length matches its size")
+    }
+
+    /// Converts an 8-bit image.
+    pub fn from_rgb8(img: &image::RgbImage) -> RgbImage {
+        RgbImage {
+            width: img.width(),
+            height: img.height(),
+            data: img.as_raw().iter().map(|&v| v as f32 / 255.0).collect(),
+        }
+    }
+}
+
+/// A binary mask, `data[y * width + x]` is 0 or 1.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Mask {
+    pub width: u32,
+    pub height: u32,
+    pub data: Vec<u8>,
+}
+
+impl Mask {
+    pub fn empty(width: u32, height: u32) -> Mask {
+        Mask {
+            width,
+            height,
+            data: vec![0; width as usize * height as usize],
+        }
+    }
+
+    pub fn get(&self, x: u32, y: u32) -> bool {
+        self.data[y as usize * self.width as usize + x as usize] != 0
+    }
+
+    pub fn count(&self) -> usize {
+        self.data.iter().filter(|&&v| v != 0).count()
+    }
+
+    pub fn iter_bool(&self) -> impl Iterator<Item = bool> + '_ {
+        self.data.iter().map(|&v| v != 0)
+    }
+}
+
+/// The resolution at which a dataset's images are loaded (DESIGN.md: intrinsics scale with it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum ImageScale {
+    /// Downscale by an integer factor: 1, 2, 4 or 8 (`1` is the image as stored).
+    Factor(u32),
+    /// Resize to this width, the height following the aspect ratio (rounded).
+    Width(u32),
+}
+
+impl ImageScale {
+    /// The size an image of `width × height` is loaded at; never below 1×1.
+    pub fn apply(self, width: u32, height: u32) -> (u32, u32) {
+        match self {
+            ImageScale::Factor(f) => {
+                let f = f.max(1);
+                ((width / f).max(1), (height / f).max(1))
+            }
+            ImageScale::Width(w) => {
+                let w = w.max(1);
+                let h = (height as f64 * w as f64 / width.max(1) as f64).round() as u32;
+                (w, h.max(1))
+            }
+        }
+    }
+
+    /// Parses the CLI spelling: `1`, `2`, `4`, `8` (factors), `0.5`, `0.25`, `0.125`
+    /// (fractions), or `w960` (a target width).
+    pub fn parse(text: &str) -> Option<ImageScale> {
+        if let Some(w) = text.strip_prefix('w') {
+            return w.parse().ok().filter(|&w| w > 0).map(ImageScale::Width);
+        }
+        if let Ok(f) = text.parse::<u32>() {
+            return [1, 2, 4, 8].contains(&f).then_some(ImageScale::Factor(f));
+        }
+        let frac: f64 = text.parse().ok()?;
+        [1u32, 2, 4, 8]
+            .into_iter()
+            .find(|&f| (1.0 / f as f64 - frac).abs() < 1e-9)
+            .map(ImageScale::Factor)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scale_parses_factors_fractions_and_widths() {
+        assert_eq!(ImageScale::parse("4"), Some(ImageScale::Factor(4)));
+        assert_eq!(ImageScale::parse("0.25"), Some(ImageScale::Factor(4)));
+        assert_eq!(ImageScale::parse("w960"), Some(ImageScale::Width(960)));
+        assert_eq!(ImageScale::parse("3"), None);
+        assert_eq!(ImageScale::parse("w0"), None);
+    }
+
+    #[test]
+    fn scale_keeps_aspect_ratio() {
+        assert_eq!(ImageScale::Factor(4).apply(800, 800), (200, 200));
+        assert_eq!(ImageScale::Width(480).apply(1920, 1080), (480, 270));
+    }
+}
