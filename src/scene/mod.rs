@@ -1,11 +1,20 @@
 //! Scene inputs and outputs: cameras, dataset readers (COLMAP, transforms.json), images and masks,
 //! PLY, the twin project file. Knows nothing of rendering or training.
 
+pub mod atomic;
 pub mod camera;
+pub mod colmap;
 pub mod dataset;
 pub mod error;
 pub mod image;
+pub mod load;
+pub mod masks;
+pub mod open;
+pub mod ply;
 pub mod points;
+pub mod project;
+pub mod transforms;
+pub mod undistort;
 
 pub use camera::{Camera, Intrinsics};
 pub use dataset::{Dataset, DatasetFormat, Distortion, LoadedView, Split, View};

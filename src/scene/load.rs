@@ -1,0 +1,281 @@
+//! Loading a view's pixels: decode (PNG/JPEG), composite RGBA on the dataset background,
+//! undistort to the view's pinhole, resize to the requested scale with its camera and masks.
+//! Also the image/mask save helpers. No dataset discovery (that is `open`), no training logic.
+
+use std::path::Path;
+
+use crate::scene::masks::{read_view_masks, resize_mask_nearest};
+use crate::scene::undistort::{undistort_mask, undistort_rgb};
+use crate::scene::{
+    Camera, Dataset, Distortion, ImageScale, LoadedView, Mask, RgbImage, SceneError,
+};
+
+fn decode(path: &Path) -> Result<image::DynamicImage, SceneError> {
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| SceneError::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| SceneError::io(path, e))?;
+    reader
+        .decode()
+        .map_err(|e| SceneError::invalid(path, format!("cannot decode image: {e}")))
+}
+
+/// Loads an image as RGB in `[0, 1]`; an alpha channel is composited on `background`
+/// (`rgb · a + background · (1 − a)`, as NeRF-synthetic loaders do). 16-bit images keep their
+/// precision.
+pub fn load_image_with_background(
+    path: &Path,
+    background: [f32; 3],
+) -> Result<RgbImage, SceneError> {
+    let img = decode(path)?;
+    let (width, height) = (img.width(), img.height());
+    let data = if img.color().has_alpha() {
+        let rgba = img.to_rgba32f();
+        let mut data = Vec::with_capacity(width as usize * height as usize * 3);
+        for p in rgba.as_raw().chunks_exact(4) {
+            let a = p[3];
+            for (&v, &bg) in p[..3].iter().zip(&background) {
+                data.push(v * a + bg * (1.0 - a));
+            }
+        }
+        data
+    } else {
+        img.to_rgb32f().into_raw()
+    };
+    Ok(RgbImage {
+        width,
+        height,
+        data,
+    })
+}
+
+/// Loads an image as RGB in `[0, 1]`, compositing any alpha on black.
+pub fn load_image(path: &Path) -> Result<RgbImage, SceneError> {
+    load_image_with_background(path, [0.0; 3])
+}
+
+/// Saves an image as 8-bit RGB PNG (values clamped to `[0, 1]`).
+pub fn save_png(path: &Path, image: &RgbImage) -> Result<(), SceneError> {
+    if image.data.len() != image.pixel_count() * 3 {
+        return Err(SceneError::invalid(
+            path,
+            format!(
+                "cannot save a {}×{} image holding {} values",
+                image.width,
+                image.height,
+                image.data.len()
+            ),
+        ));
+    }
+    image
+        .to_rgb8()
+        .save_with_format(path, image::ImageFormat::Png)
+        .map_err(|e| SceneError::invalid(path, format!("cannot write PNG: {e}")))
+}
+
+/// Saves a mask as an 8-bit grey PNG, 255 where set (the per-class mask format it reads back).
+pub fn save_mask_png(path: &Path, mask: &Mask) -> Result<(), SceneError> {
+    let bytes = mask
+        .data
+        .iter()
+        .map(|&v| if v != 0 { 255 } else { 0 })
+        .collect();
+    let img = image::GrayImage::from_raw(mask.width, mask.height, bytes).ok_or_else(|| {
+        SceneError::invalid(
+            path,
+            format!(
+                "cannot save a {}×{} mask holding {} values",
+                mask.width,
+                mask.height,
+                mask.data.len()
+            ),
+        )
+    })?;
+    img.save_with_format(path, image::ImageFormat::Png)
+        .map_err(|e| SceneError::invalid(path, format!("cannot write PNG: {e}")))
+}
+
+/// Resizes an image. An exact integer downscale (both axes by the same `f`) averages each
+/// `f × f` block (a box filter: exact area averaging, what downscaled 3DGS datasets amount to);
+/// any other size uses a triangle (bilinear, widened when shrinking) filter.
+pub fn resize_rgb(image: &RgbImage, width: u32, height: u32) -> RgbImage {
+    let (sw, sh) = (image.width, image.height);
+    if (sw, sh) == (width, height) {
+        return image.clone();
+    }
+    if width > 0 && height > 0 && sw % width == 0 && sh % height == 0 && sw / width == sh / height {
+        return box_downscale(image, sw / width);
+    }
+    let Some(buffer) =
+        image::ImageBuffer::<image::Rgb<f32>, Vec<f32>>::from_raw(sw, sh, image.data.clone())
+    else {
+        return RgbImage::filled(width, height, [0.0; 3]);
+    };
+    let resized = image::imageops::resize(
+        &buffer,
+        width,
+        height,
+        image::imageops::FilterType::Triangle,
+    );
+    RgbImage {
+        width,
+        height,
+        data: resized.into_raw(),
+    }
+}
+
+fn box_downscale(image: &RgbImage, f: u32) -> RgbImage {
+    let f = f as usize;
+    let (sw, w, h) = (
+        image.width as usize,
+        image.width as usize / f,
+        image.height as usize / f,
+    );
+    let mut data = vec![0.0f32; w * h * 3];
+    let norm = 1.0 / (f * f) as f32;
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = [0.0f32; 3];
+            for dy in 0..f {
+                let row = (y * f + dy) * sw;
+                for dx in 0..f {
+                    let i = (row + x * f + dx) * 3;
+                    acc[0] += image.data[i];
+                    acc[1] += image.data[i + 1];
+                    acc[2] += image.data[i + 2];
+                }
+            }
+            let o = (y * w + x) * 3;
+            for (d, a) in data[o..o + 3].iter_mut().zip(acc) {
+                *d = a * norm;
+            }
+        }
+    }
+    RgbImage {
+        width: w as u32,
+        height: h as u32,
+        data,
+    }
+}
+
+/// The integer factor by which an image of `image` size is a downscaled copy of one of `camera`
+/// size (COLMAP's `images_2/4/8` folders beside a full-resolution model), within the one pixel
+/// that rounding an odd size allows.
+fn downscale_factor(camera: (u32, u32), image: (u32, u32)) -> Option<u32> {
+    [2u32, 4, 8].into_iter().find(|&f| {
+        let close = |full: u32, small: u32| {
+            (i64::from(small) * i64::from(f) - i64::from(full)).abs() < i64::from(f)
+        };
+        close(camera.0, image.0) && close(camera.1, image.1)
+    })
+}
+
+fn scale_distortion(d: &Distortion, sx: f32, sy: f32) -> Distortion {
+    Distortion {
+        fx: d.fx * sx,
+        fy: d.fy * sy,
+        cx: d.cx * sx,
+        cy: d.cy * sy,
+        ..*d
+    }
+}
+
+impl Dataset {
+    /// Loads view `index` at `scale`: pixels (alpha composited on `self.background`),
+    /// undistorted when the view has a distortion, resized, with the camera resized to match and
+    /// the view's damage masks (nearest-neighbour). An image whose size disagrees with its
+    /// camera is an error naming the file — unless it is the camera's size divided by 2, 4 or 8
+    /// (a pre-downscaled copy), in which case the intrinsics are scaled to the image.
+    pub fn load_view(&self, index: usize, scale: ImageScale) -> Result<LoadedView, SceneError> {
+        let view = self.views.get(index).ok_or_else(|| {
+            SceneError::invalid(
+                &self.root,
+                format!("view {index} does not exist ({} views)", self.views.len()),
+            )
+        })?;
+        let path = &view.image_path;
+        let mut image = load_image_with_background(path, self.background)?;
+        let stored = (image.width, image.height);
+        let k = view.camera.intrinsics;
+        let mut camera = view.camera;
+        let mut distortion = view.distortion;
+        if stored != (k.width, k.height) {
+            if downscale_factor((k.width, k.height), stored).is_none() {
+                return Err(SceneError::invalid(
+                    path,
+                    format!(
+                        "image is {}×{} but its camera is {}×{}",
+                        stored.0, stored.1, k.width, k.height
+                    ),
+                ));
+            }
+            camera = camera.resized(stored.0, stored.1);
+            let (sx, sy) = (
+                stored.0 as f32 / k.width as f32,
+                stored.1 as f32 / k.height as f32,
+            );
+            distortion = distortion.map(|d| scale_distortion(&d, sx, sy));
+        }
+        let mut masks = match &self.masks_dir {
+            Some(dir) => read_view_masks(dir, &view.name, path, stored)?,
+            None => Default::default(),
+        };
+        if let Some(d) = &distortion {
+            image = undistort_rgb(&image, d, &camera.intrinsics);
+            for mask in masks.values_mut() {
+                *mask = undistort_mask(mask, d, &camera.intrinsics);
+            }
+        }
+        let (width, height) = scale.apply(stored.0, stored.1);
+        let image = resize_rgb(&image, width, height);
+        for mask in masks.values_mut() {
+            *mask = resize_mask_nearest(mask, width, height);
+        }
+        Ok(LoadedView {
+            name: view.name.clone(),
+            camera: Camera::resized(&camera, width, height),
+            image,
+            masks,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn box_filter_averages_blocks_and_triangle_handles_other_sizes() {
+        let img = RgbImage {
+            width: 4,
+            height: 2,
+            data: (0..24).map(|v| v as f32).collect(),
+        };
+        let half = resize_rgb(&img, 2, 1);
+        // Block (0,0): pixels 0, 1, 4, 5 → channel 0 values 0, 3, 12, 15 → mean 7.5.
+        assert_eq!(half.pixel(0, 0), [7.5, 8.5, 9.5]);
+        assert_eq!(half.pixel(1, 0), [13.5, 14.5, 15.5]);
+        let odd = resize_rgb(&img, 3, 2);
+        assert_eq!((odd.width, odd.height, odd.data.len()), (3, 2, 18));
+    }
+
+    #[test]
+    fn downscaled_copies_are_recognised_within_rounding() {
+        assert_eq!(downscale_factor((1297, 840), (649, 420)), Some(2));
+        assert_eq!(downscale_factor((1297, 840), (162, 105)), Some(8));
+        assert_eq!(downscale_factor((1297, 840), (600, 420)), None);
+    }
+
+    #[test]
+    fn rgba_is_composited_on_the_background() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.png");
+        image::RgbaImage::from_raw(2, 1, vec![255, 0, 0, 255, 255, 0, 0, 0])
+            .unwrap()
+            .save(&path)
+            .unwrap();
+        let img = load_image_with_background(&path, [1.0, 1.0, 1.0]).unwrap();
+        assert_eq!(img.pixel(0, 0), [1.0, 0.0, 0.0]);
+        assert_eq!(img.pixel(1, 0), [1.0, 1.0, 1.0]);
+    }
+}

@@ -1,0 +1,364 @@
+//! Damage masks on disk: per-class binary PNGs `masks/<class>/<stem>.png` and QuakeCity-style
+//! colour-coded masks `masks/<stem>.png`; counting, loading, decoding, nearest-neighbour resizing.
+//! Knows nothing of cameras or training; never guesses a class for an uncoloured mask.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use crate::damage::DamageClass;
+use crate::scene::{Mask, SceneError};
+
+/// Largest Euclidean RGB distance at which a colour-coded pixel still counts as a palette colour.
+/// 40 covers JPEG-ish noise and anti-aliased edges near a class colour while staying well below
+/// the smallest palette distance (spalling (255,192,203) to rebar (255,255,50): 165).
+pub const COLOUR_TOLERANCE: f32 = 40.0;
+
+/// Pixel-count floor below which a colour-coded mask does not count a class as present (a few
+/// stray anti-aliased pixels must not add a class to `count_masks`).
+const MIN_PRESENT_PIXELS: usize = 1;
+
+fn is_png(path: &Path) -> bool {
+    path.is_file()
+        && path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+}
+
+/// PNG files directly in `dir`, sorted; an unreadable or missing folder gives none.
+fn png_files(dir: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| is_png(p))
+        .collect();
+    files.sort();
+    files
+}
+
+/// Counts mask files per class: every `masks/<class>/*.png` counts once for its class, and every
+/// colour-coded `masks/*.png` counts once for each class colour present in it (so the root-level
+/// masks are decoded: cost grows with their pixel count; rayon spreads it over the cores).
+/// Root-level masks that cannot be decoded, or are single-channel (no class), count for nothing —
+/// `load_masks` reports them as errors when a view is loaded. A missing folder counts nothing.
+pub fn count_masks(masks_dir: &Path) -> BTreeMap<DamageClass, usize> {
+    use rayon::prelude::*;
+    let mut counts = BTreeMap::new();
+    for class in DamageClass::ALL {
+        let n = png_files(&masks_dir.join(class.id())).len();
+        if n > 0 {
+            counts.insert(class, n);
+        }
+    }
+    let present: Vec<[bool; 3]> = png_files(masks_dir)
+        .par_iter()
+        .filter_map(|path| read_colour_mask_classes(path).ok())
+        .collect();
+    for flags in present {
+        for class in DamageClass::ALL {
+            if flags[class.channel()] {
+                *counts.entry(class).or_insert(0) += 1;
+            }
+        }
+    }
+    counts
+}
+
+/// Which classes a colour-coded mask file contains.
+fn read_colour_mask_classes(path: &Path) -> Result<[bool; 3], SceneError> {
+    let masks = read_colour_mask(path, &default_palette())?;
+    let mut present = [false; 3];
+    for (class, mask) in masks {
+        present[class.channel()] = mask.count() >= MIN_PRESENT_PIXELS;
+    }
+    Ok(present)
+}
+
+/// The class palette of colour-coded masks: `DamageClass::default_colour` per class.
+pub fn default_palette() -> BTreeMap<DamageClass, [u8; 3]> {
+    DamageClass::ALL
+        .into_iter()
+        .map(|c| (c, c.default_colour()))
+        .collect()
+}
+
+fn decode(path: &Path) -> Result<image::DynamicImage, SceneError> {
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| SceneError::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| SceneError::io(path, e))?;
+    reader
+        .decode()
+        .map_err(|e| SceneError::invalid(path, format!("cannot decode image: {e}")))
+}
+
+/// Reads a per-class binary mask: a pixel is damage when any colour channel is above 127 (8-bit)
+/// or above 32767 (16-bit), so 0/255 and 0/1·65535 masks both work. Alpha is ignored — except that a
+/// fully transparent pixel is background, so RGBA masks drawn on a transparent layer work.
+/// 0/1-valued 8-bit masks are also accepted: when the maximum is 1 the threshold is 0.
+pub fn read_binary_mask(path: &Path) -> Result<Mask, SceneError> {
+    let img = decode(path)?;
+    let (width, height) = (img.width(), img.height());
+    let rgba = img.to_rgba16();
+    let raw = rgba.as_raw();
+    let max = raw
+        .chunks_exact(4)
+        .map(|p| p[0].max(p[1]).max(p[2]))
+        .max()
+        .unwrap_or(0);
+    // 0/1 masks (numpy `astype(uint8)` without ×255) widen to 0/257 in 16-bit.
+    let threshold = if max <= 257 { 0 } else { 32767 };
+    let data = raw
+        .chunks_exact(4)
+        .map(|p| u8::from(p[3] > 0 && p[0].max(p[1]).max(p[2]) > threshold))
+        .collect();
+    Ok(Mask {
+        width,
+        height,
+        data,
+    })
+}
+
+/// Decodes a colour-coded mask: each pixel goes to the palette colour nearest to it when within
+/// `COLOUR_TOLERANCE`, else (black, anti-aliasing, other colours) to background. Returns one mask
+/// per palette class (possibly empty). A single-channel (grey) image has no colours and is refused:
+/// it belongs in `masks/<class>/`.
+pub fn read_colour_mask(
+    path: &Path,
+    palette: &BTreeMap<DamageClass, [u8; 3]>,
+) -> Result<BTreeMap<DamageClass, Mask>, SceneError> {
+    let img = decode(path)?;
+    if !img.color().has_color() {
+        return Err(SceneError::invalid(
+            path,
+            "a grey single-channel mask directly in masks/ has no class colours; \
+             put per-class binary masks in masks/<class>/",
+        ));
+    }
+    let (width, height) = (img.width(), img.height());
+    let rgba = img.to_rgba8();
+    let classes: Vec<(DamageClass, [f32; 3])> = palette
+        .iter()
+        .map(|(&c, rgb)| (c, rgb.map(f32::from)))
+        .collect();
+    let mut masks: BTreeMap<DamageClass, Mask> = palette
+        .keys()
+        .map(|&c| (c, Mask::empty(width, height)))
+        .collect();
+    let tol2 = COLOUR_TOLERANCE * COLOUR_TOLERANCE;
+    for (i, p) in rgba.as_raw().chunks_exact(4).enumerate() {
+        if p[3] == 0 || (p[0] == 0 && p[1] == 0 && p[2] == 0) {
+            continue;
+        }
+        let rgb = [p[0], p[1], p[2]].map(f32::from);
+        let mut best: Option<(DamageClass, f32)> = None;
+        for &(class, c) in &classes {
+            let d2 = (rgb[0] - c[0]).powi(2) + (rgb[1] - c[1]).powi(2) + (rgb[2] - c[2]).powi(2);
+            if d2 <= tol2 && best.is_none_or(|(_, b)| d2 < b) {
+                best = Some((class, d2));
+            }
+        }
+        if let Some((class, _)) = best
+            && let Some(mask) = masks.get_mut(&class)
+        {
+            mask.data[i] = 1;
+        }
+    }
+    Ok(masks)
+}
+
+/// The masks of the view whose image file stem is `stem`, at the stored image size: per-class
+/// `masks_dir/<class>/<stem>.png` and, OR-ed into them, a colour-coded `masks_dir/<stem>.png`.
+/// Classes without a mask file are absent from the map. A mask whose size differs from the
+/// image's (`image_size`, before any scaling) is an error naming both files.
+pub fn read_view_masks(
+    masks_dir: &Path,
+    stem: &str,
+    image_path: &Path,
+    image_size: (u32, u32),
+) -> Result<BTreeMap<DamageClass, Mask>, SceneError> {
+    let file = format!("{stem}.png");
+    let check = |path: &Path, mask: &Mask| -> Result<(), SceneError> {
+        if (mask.width, mask.height) != image_size {
+            return Err(SceneError::invalid(
+                path,
+                format!(
+                    "mask is {}×{} but its image {} is {}×{}",
+                    mask.width,
+                    mask.height,
+                    image_path.display(),
+                    image_size.0,
+                    image_size.1
+                ),
+            ));
+        }
+        Ok(())
+    };
+    let mut masks = BTreeMap::new();
+    for class in DamageClass::ALL {
+        let path = masks_dir.join(class.id()).join(&file);
+        if path.is_file() {
+            let mask = read_binary_mask(&path)?;
+            check(&path, &mask)?;
+            masks.insert(class, mask);
+        }
+    }
+    let coded = masks_dir.join(&file);
+    if coded.is_file() {
+        for (class, mask) in read_colour_mask(&coded, &default_palette())? {
+            check(&coded, &mask)?;
+            match masks.get_mut(&class) {
+                Some(existing) => {
+                    for (a, b) in existing.data.iter_mut().zip(&mask.data) {
+                        *a |= *b;
+                    }
+                }
+                None => {
+                    masks.insert(class, mask);
+                }
+            }
+        }
+    }
+    Ok(masks)
+}
+
+/// Nearest-neighbour resize (pixel centres at +0.5, as in image resamplers), keeping 0/1 labels.
+pub fn resize_mask_nearest(mask: &Mask, width: u32, height: u32) -> Mask {
+    if (mask.width, mask.height) == (width, height) {
+        return mask.clone();
+    }
+    let (sw, sh) = (mask.width as usize, mask.height as usize);
+    let mut out = Mask::empty(width, height);
+    if sw == 0 || sh == 0 {
+        return out;
+    }
+    let xs: Vec<usize> = (0..width as usize)
+        .map(|x| (((x as f64 + 0.5) * sw as f64 / width as f64) as usize).min(sw - 1))
+        .collect();
+    for y in 0..height as usize {
+        let sy = (((y as f64 + 0.5) * sh as f64 / height as f64) as usize).min(sh - 1);
+        let src = &mask.data[sy * sw..(sy + 1) * sw];
+        let dst = &mut out.data[y * width as usize..(y + 1) * width as usize];
+        for (d, &sx) in dst.iter_mut().zip(&xs) {
+            *d = src[sx];
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write_rgb(path: &Path, w: u32, h: u32, f: impl Fn(u32, u32) -> [u8; 3]) {
+        let img = image::RgbImage::from_fn(w, h, |x, y| image::Rgb(f(x, y)));
+        img.save(path).unwrap();
+    }
+
+    #[test]
+    fn colour_coded_mask_decodes_each_palette_class_and_ignores_black() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.png");
+        // Columns: black, crack red, spalling pink (slightly off), rebar yellow, grey (no class).
+        write_rgb(&path, 5, 2, |x, _| match x {
+            0 => [0, 0, 0],
+            1 => [255, 0, 0],
+            2 => [250, 190, 200],
+            3 => [255, 255, 50],
+            _ => [128, 128, 128],
+        });
+        let masks = read_colour_mask(&path, &default_palette()).unwrap();
+        assert_eq!(
+            masks[&DamageClass::Crack].data,
+            [0, 1, 0, 0, 0, 0, 1, 0, 0, 0]
+        );
+        assert_eq!(
+            masks[&DamageClass::Spalling].data,
+            [0, 0, 1, 0, 0, 0, 0, 1, 0, 0]
+        );
+        assert_eq!(
+            masks[&DamageClass::Rebar].data,
+            [0, 0, 0, 1, 0, 0, 0, 0, 1, 0]
+        );
+    }
+
+    #[test]
+    fn binary_masks_threshold_grey_and_accept_zero_one_values() {
+        let dir = tempfile::tempdir().unwrap();
+        let grey = dir.path().join("g.png");
+        image::GrayImage::from_raw(3, 1, vec![0, 127, 200])
+            .unwrap()
+            .save(&grey)
+            .unwrap();
+        assert_eq!(read_binary_mask(&grey).unwrap().data, [0, 0, 1]);
+        let ones = dir.path().join("o.png");
+        image::GrayImage::from_raw(3, 1, vec![0, 1, 1])
+            .unwrap()
+            .save(&ones)
+            .unwrap();
+        assert_eq!(read_binary_mask(&ones).unwrap().data, [0, 1, 1]);
+    }
+
+    #[test]
+    fn count_masks_counts_class_folders_and_colour_coded_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let masks = dir.path();
+        std::fs::create_dir_all(masks.join("crack")).unwrap();
+        std::fs::create_dir_all(masks.join("rebar")).unwrap();
+        for stem in ["a", "b"] {
+            image::GrayImage::new(4, 4)
+                .save(masks.join("crack").join(format!("{stem}.png")))
+                .unwrap();
+        }
+        image::GrayImage::new(4, 4)
+            .save(masks.join("rebar/a.png"))
+            .unwrap();
+        // One colour-coded mask with spalling and crack pixels.
+        write_rgb(&masks.join("c.png"), 4, 4, |x, _| match x {
+            0 => [255, 192, 203],
+            1 => [255, 0, 0],
+            _ => [0, 0, 0],
+        });
+        std::fs::write(masks.join("notes.txt"), "not a mask").unwrap();
+        let counts = count_masks(masks);
+        assert_eq!(counts.get(&DamageClass::Crack), Some(&3));
+        assert_eq!(counts.get(&DamageClass::Spalling), Some(&1));
+        assert_eq!(counts.get(&DamageClass::Rebar), Some(&1));
+        assert!(count_masks(&masks.join("missing")).is_empty());
+    }
+
+    #[test]
+    fn wrong_size_mask_names_both_files() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(dir.path().join("crack")).unwrap();
+        image::GrayImage::new(4, 3)
+            .save(dir.path().join("crack/v.png"))
+            .unwrap();
+        let image = Path::new("/data/images/v.jpg");
+        let err = read_view_masks(dir.path(), "v", image, (8, 6))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("crack/v.png") && err.contains("/data/images/v.jpg"),
+            "{err}"
+        );
+        let ok = read_view_masks(dir.path(), "v", image, (4, 3)).unwrap();
+        assert_eq!(ok.len(), 1);
+    }
+
+    #[test]
+    fn nearest_resize_picks_source_pixels() {
+        let mask = Mask {
+            width: 4,
+            height: 2,
+            data: vec![1, 0, 0, 1, 0, 1, 1, 0],
+        };
+        let half = resize_mask_nearest(&mask, 2, 1);
+        // Centres of output pixels map to source x = 1 and 3 (row 1).
+        assert_eq!(half.data, [1, 0]);
+        let up = resize_mask_nearest(&mask, 8, 4);
+        assert_eq!(up.count(), mask.count() * 4);
+    }
+}

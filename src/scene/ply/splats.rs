@@ -1,0 +1,251 @@
+//! `Splats` to and from the 3DGS PLY layout (see the format notes in `ply/mod.rs`). Reading
+//! finds properties by name, so other tools' property orders work; it never trusts a count the
+//! file cannot hold and refuses NaN/Inf, naming the vertex.
+
+use std::io::Write;
+use std::path::Path;
+
+use glam::{Quat, Vec3};
+
+use super::header::RowReader;
+use crate::damage::DamageClass;
+use crate::scene::SceneError;
+use crate::scene::atomic::write_atomic;
+use crate::splats::Splats;
+use crate::splats::model::sh_coeffs_for_degree;
+
+/// Largest id stored exactly in the `double id` property (2^53).
+const MAX_EXACT_ID: u64 = 1 << 53;
+
+/// The PLY property name of label channel `k`: `label_<class>` for the known classes.
+pub fn label_property(k: usize) -> String {
+    match DamageClass::ALL.get(k) {
+        Some(class) => format!("label_{}", class.id()),
+        None => format!("label_{k}"),
+    }
+}
+
+/// The standard 3DGS property names, in the order the original `save_ply` writes them.
+pub fn standard_properties(sh_degree: u32) -> Vec<String> {
+    let rest = 3 * (sh_coeffs_for_degree(sh_degree) - 1);
+    let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz"].map(String::from).into();
+    names.extend((0..3).map(|i| format!("f_dc_{i}")));
+    names.extend((0..rest).map(|i| format!("f_rest_{i}")));
+    names.push("opacity".into());
+    names.extend((0..3).map(|i| format!("scale_{i}")));
+    names.extend((0..4).map(|i| format!("rot_{i}")));
+    names
+}
+
+/// The header damage-twin writes: the 3DGS header (all `float`), then `label_*` floats when the
+/// model has label channels, then `float survey` and `double id`.
+pub fn splat_header(splats: &Splats) -> String {
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
+        splats.len()
+    );
+    for name in standard_properties(splats.sh_degree) {
+        header.push_str(&format!("property float {name}\n"));
+    }
+    for k in 0..splats.label_channels {
+        header.push_str(&format!("property float {}\n", label_property(k)));
+    }
+    header.push_str("property float survey\nproperty double id\nend_header\n");
+    header
+}
+
+/// Writes `splats` as a binary little-endian 3DGS PLY (atomically: temp file, fsync, rename).
+pub fn write_splats(path: &Path, splats: &Splats) -> Result<(), SceneError> {
+    splats
+        .check_lengths()
+        .map_err(|m| SceneError::invalid(path, format!("cannot save splats: {m}")))?;
+    if splats.sh_degree > 3 {
+        return Err(SceneError::invalid(
+            path,
+            format!("SH degree {} > 3 has no 3DGS PLY layout", splats.sh_degree),
+        ));
+    }
+    if let Some(id) = splats.meta.ids.iter().find(|&&id| id > MAX_EXACT_ID) {
+        return Err(SceneError::invalid(
+            path,
+            format!("Gaussian id {id} does not fit the PLY `double id` exactly"),
+        ));
+    }
+    let k = splats.sh_coeffs();
+    let labels = splats.label_channels;
+    write_atomic(path, |w| {
+        w.write_all(splat_header(splats).as_bytes())?;
+        let mut row: Vec<u8> = Vec::with_capacity(4 * (15 + 3 * k + labels) + 8);
+        for g in 0..splats.len() {
+            row.clear();
+            let mut put = |v: f32| row.extend_from_slice(&v.to_le_bytes());
+            let m = splats.means[g];
+            [m.x, m.y, m.z, 0.0, 0.0, 0.0]
+                .into_iter()
+                .for_each(&mut put);
+            let sh = splats.sh_of(g);
+            (0..3).for_each(|c| put(sh[c]));
+            for c in 0..3 {
+                for j in 1..k {
+                    put(sh[j * 3 + c]);
+                }
+            }
+            put(splats.raw_opacities[g]);
+            let s = splats.log_scales[g];
+            [s.x, s.y, s.z].into_iter().for_each(&mut put);
+            let q = splats.rotations[g];
+            [q.w, q.x, q.y, q.z].into_iter().for_each(&mut put);
+            splats.labels_of(g).iter().for_each(|&v| put(v));
+            put(f32::from(splats.meta.survey[g]));
+            row.extend_from_slice(&(splats.meta.ids[g] as f64).to_le_bytes());
+            w.write_all(&row)?;
+        }
+        Ok(())
+    })
+}
+
+/// Reads a 3DGS PLY (binary either endianness or ASCII; any property order; any numeric type).
+/// SH degree follows the `f_rest_*` count; labels, survey and id are optional (ids default to
+/// the vertex index, surveys to 0). Refuses missing properties, NaN/Inf, an all-zero rotation,
+/// bad counts and truncated data.
+pub fn read_splats(path: &Path) -> Result<Splats, SceneError> {
+    let (header, mut rows) = RowReader::open(path, "vertex")?;
+    let bad = |msg: String| SceneError::invalid(path, msg);
+    let vertex = header
+        .elements
+        .iter()
+        .find(|e| e.name == "vertex")
+        .ok_or_else(|| bad("no vertex element".into()))?;
+    let require = |name: &str| {
+        vertex
+            .find(name)
+            .ok_or_else(|| bad(format!("missing required property `{name}`")))
+    };
+    let mut rest_count = 0;
+    while vertex.find(&format!("f_rest_{rest_count}")).is_some() {
+        rest_count += 1;
+    }
+    let sh_degree = (0..=3u32)
+        .find(|&d| 3 * (sh_coeffs_for_degree(d) - 1) == rest_count)
+        .ok_or_else(|| {
+            bad(format!(
+                "{rest_count} consecutive f_rest properties: expected 0, 9, 24 or 45 (SH degree 0..3)"
+            ))
+        })?;
+    if vertex
+        .properties
+        .iter()
+        .filter(|p| p.name.starts_with("f_rest_"))
+        .count()
+        != rest_count
+    {
+        return Err(bad("f_rest properties are not numbered 0..n-1".into()));
+    }
+    let xyz = [require("x")?, require("y")?, require("z")?];
+    let dc = [require("f_dc_0")?, require("f_dc_1")?, require("f_dc_2")?];
+    let rest: Vec<usize> = (0..rest_count)
+        .map(|i| require(&format!("f_rest_{i}")))
+        .collect::<Result<_, _>>()?;
+    let opacity = require("opacity")?;
+    let scale = [
+        require("scale_0")?,
+        require("scale_1")?,
+        require("scale_2")?,
+    ];
+    let rot = [
+        require("rot_0")?,
+        require("rot_1")?,
+        require("rot_2")?,
+        require("rot_3")?,
+    ];
+    let mut label_props = Vec::new();
+    while let Some(i) = vertex.find(&label_property(label_props.len())) {
+        label_props.push(i);
+    }
+    let survey = vertex.find("survey");
+    let id = vertex.find("id");
+
+    let n = rows.count;
+    let k = sh_coeffs_for_degree(sh_degree);
+    let mut splats = Splats::empty(sh_degree, label_props.len());
+    splats.means.reserve_exact(n);
+    splats.log_scales.reserve_exact(n);
+    splats.rotations.reserve_exact(n);
+    splats.raw_opacities.reserve_exact(n);
+    splats.sh.reserve_exact(n * k * 3);
+    splats.raw_labels.reserve_exact(n * label_props.len());
+    splats.meta.ids.reserve_exact(n);
+    splats.meta.survey.reserve_exact(n);
+    splats.meta.frozen.reserve_exact(n);
+
+    let names = &vertex.properties;
+    let mut values = Vec::with_capacity(names.len());
+    let mut sh = vec![0.0f32; k * 3];
+    let mut labels = vec![0.0f32; label_props.len()];
+    let mut g = 0usize;
+    while rows.next_row(&mut values)? {
+        // Every value we keep must be finite as an f32 (a huge double overflows to Inf).
+        let get = |i: usize| -> Result<f32, SceneError> {
+            let v = values[i] as f32;
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(bad(format!(
+                    "vertex {g}: property `{}` is {} (NaN/Inf not allowed)",
+                    names[i].name, values[i]
+                )))
+            }
+        };
+        let mean = Vec3::new(get(xyz[0])?, get(xyz[1])?, get(xyz[2])?);
+        let log_scale = Vec3::new(get(scale[0])?, get(scale[1])?, get(scale[2])?);
+        // PLY stores (w, x, y, z).
+        let rotation = Quat::from_xyzw(get(rot[1])?, get(rot[2])?, get(rot[3])?, get(rot[0])?);
+        if rotation.to_array().iter().all(|&v| v == 0.0) {
+            return Err(bad(format!("vertex {g}: rotation is all zeros")));
+        }
+        let raw_opacity = get(opacity)?;
+        for (c, &dc_c) in dc.iter().enumerate() {
+            sh[c] = get(dc_c)?;
+            for j in 1..k {
+                sh[j * 3 + c] = get(rest[c * (k - 1) + (j - 1)])?;
+            }
+        }
+        for (slot, &i) in labels.iter_mut().zip(&label_props) {
+            *slot = get(i)?;
+        }
+        let survey = match survey {
+            Some(i) => {
+                let v = values[i];
+                if !(v >= 0.0 && v <= f64::from(u16::MAX) && v.fract() == 0.0) {
+                    return Err(bad(format!(
+                        "vertex {g}: survey {v} is not an integer 0..65535"
+                    )));
+                }
+                v as u16
+            }
+            None => 0,
+        };
+        let id = match id {
+            Some(i) => {
+                let v = values[i];
+                if !(v >= 0.0 && v <= MAX_EXACT_ID as f64 && v.fract() == 0.0) {
+                    return Err(bad(format!("vertex {g}: id {v} is not an integer 0..2^53")));
+                }
+                v as u64
+            }
+            None => g as u64,
+        };
+        splats.push(
+            mean,
+            log_scale,
+            rotation,
+            raw_opacity,
+            &sh,
+            &labels,
+            id,
+            survey,
+        );
+        g += 1;
+    }
+    Ok(splats)
+}

@@ -1,0 +1,323 @@
+//! The twin project file `twin.ron`: format version, damage classes and colours, surveys in
+//! date order (inputs and outputs by path), and a few settings. Loading refuses files from a
+//! newer program; saving is atomic. Holds paths only; never opens the datasets or models.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::damage::{DamageClass, NEW_DAMAGE_COLOUR};
+use crate::scene::atomic::write_atomic;
+use crate::scene::{ImageScale, SceneError};
+
+/// The newest `twin.ron` format this program reads and the one it writes.
+pub const PROJECT_FORMAT_VERSION: u32 = 1;
+
+/// The project file's name inside a project folder.
+pub const PROJECT_FILE: &str = "twin.ron";
+
+/// A damage class and the colour it is drawn in.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ClassStyle {
+    pub class: DamageClass,
+    pub colour: [u8; 3],
+}
+
+/// One survey (a capture of the structure at one date): its inputs and, once trained, outputs.
+/// Relative paths are relative to the folder holding `twin.ron` (see `Project::resolve`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Survey {
+    pub name: String,
+    /// ISO date `YYYY-MM-DD`; surveys are kept in this order (ties keep insertion order).
+    pub date: String,
+    /// The dataset folder (COLMAP or transforms.json), with `masks/` beside its images.
+    pub dataset: PathBuf,
+    /// The trained model PLY, once there is one.
+    #[serde(default)]
+    pub model: Option<PathBuf>,
+    /// Metrics JSON of the last evaluation.
+    #[serde(default)]
+    pub metrics: Option<PathBuf>,
+}
+
+/// Project-wide settings. Every field has a default, so files written before a field existed
+/// still load.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ProjectSettings {
+    /// Background colour for rendering and for compositing RGBA images.
+    pub background: [f32; 3],
+    /// The resolution images are trained at.
+    pub scale: ImageScale,
+    /// Colour of damage that appeared after an earlier survey.
+    pub new_damage_colour: [u8; 3],
+    /// Every n-th image is held out for evaluation (the 3DGS convention is 8).
+    pub held_out_every: u32,
+}
+
+impl Default for ProjectSettings {
+    fn default() -> Self {
+        ProjectSettings {
+            background: [0.0; 3],
+            scale: ImageScale::Factor(1),
+            new_damage_colour: NEW_DAMAGE_COLOUR,
+            held_out_every: 8,
+        }
+    }
+}
+
+/// The twin project.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Project {
+    pub format_version: u32,
+    pub classes: Vec<ClassStyle>,
+    /// Surveys in date order; a Gaussian's `survey` index points into this list.
+    pub surveys: Vec<Survey>,
+    #[serde(default)]
+    pub settings: ProjectSettings,
+}
+
+/// Why a survey cannot be added.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SurveyError {
+    #[error("survey `{name}`: date `{date}` is not YYYY-MM-DD")]
+    BadDate { name: String, date: String },
+    #[error(
+        "survey `{name}` ({date}) is older than the latest survey `{latest}` ({latest_date}); surveys are indexed in date order"
+    )]
+    OutOfOrder {
+        name: String,
+        date: String,
+        latest: String,
+        latest_date: String,
+    },
+    #[error("a survey named `{0}` already exists")]
+    Duplicate(String),
+}
+
+/// Only the version, read first so that a newer file is refused before its fields are parsed.
+#[derive(Deserialize)]
+#[serde(rename = "Project")]
+struct VersionProbe {
+    format_version: u32,
+}
+
+fn is_iso_date(date: &str) -> bool {
+    let b = date.as_bytes();
+    b.len() == 10
+        && b[4] == b'-'
+        && b[7] == b'-'
+        && b.iter()
+            .enumerate()
+            .all(|(i, c)| i == 4 || i == 7 || c.is_ascii_digit())
+        && (1..=12).contains(&date[5..7].parse::<u32>().unwrap_or(0))
+        && (1..=31).contains(&date[8..10].parse::<u32>().unwrap_or(0))
+}
+
+impl Default for Project {
+    fn default() -> Self {
+        Project::new()
+    }
+}
+
+impl Project {
+    /// An empty project with the default classes and colours.
+    pub fn new() -> Project {
+        Project {
+            format_version: PROJECT_FORMAT_VERSION,
+            classes: DamageClass::ALL
+                .into_iter()
+                .map(|class| ClassStyle {
+                    class,
+                    colour: class.default_colour(),
+                })
+                .collect(),
+            surveys: Vec::new(),
+            settings: ProjectSettings::default(),
+        }
+    }
+
+    /// The colour of a class (its default when the project does not list it).
+    pub fn colour(&self, class: DamageClass) -> [u8; 3] {
+        self.classes
+            .iter()
+            .find(|s| s.class == class)
+            .map_or(class.default_colour(), |s| s.colour)
+    }
+
+    /// Appends a survey, which must not be older than the latest one (indices must not shift).
+    /// Returns its index.
+    pub fn add_survey(&mut self, survey: Survey) -> Result<usize, SurveyError> {
+        if !is_iso_date(&survey.date) {
+            return Err(SurveyError::BadDate {
+                name: survey.name,
+                date: survey.date,
+            });
+        }
+        if self.surveys.iter().any(|s| s.name == survey.name) {
+            return Err(SurveyError::Duplicate(survey.name));
+        }
+        if let Some(latest) = self.surveys.last()
+            && survey.date < latest.date
+        {
+            return Err(SurveyError::OutOfOrder {
+                name: survey.name,
+                date: survey.date,
+                latest: latest.name.clone(),
+                latest_date: latest.date.clone(),
+            });
+        }
+        self.surveys.push(survey);
+        Ok(self.surveys.len() - 1)
+    }
+
+    /// A path from the project file made usable: relative paths join the project file's folder.
+    pub fn resolve(project_file: &Path, path: &Path) -> PathBuf {
+        if path.is_absolute() {
+            return path.to_path_buf();
+        }
+        project_file
+            .parent()
+            .map_or_else(|| path.to_path_buf(), |dir| dir.join(path))
+    }
+
+    /// Checks what the types cannot: date format and order, unique names, a finite background.
+    fn validate(&self) -> Result<(), String> {
+        let mut check = Project {
+            surveys: Vec::new(),
+            ..self.clone()
+        };
+        for survey in &self.surveys {
+            check
+                .add_survey(survey.clone())
+                .map_err(|e| e.to_string())?;
+        }
+        let bg = self.settings.background;
+        if !bg.iter().all(|v| (0.0..=1.0).contains(v)) {
+            return Err(format!(
+                "settings.background {bg:?} is not a colour in [0, 1]"
+            ));
+        }
+        Ok(())
+    }
+
+    /// Reads `twin.ron`. A newer format version than `PROJECT_FORMAT_VERSION` is refused
+    /// before anything else is interpreted.
+    pub fn load(path: &Path) -> Result<Project, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
+        let probe: VersionProbe = ron::from_str(&text)
+            .map_err(|e| SceneError::invalid(path, format!("not a twin project file: {e}")))?;
+        if probe.format_version > PROJECT_FORMAT_VERSION {
+            return Err(SceneError::unsupported(
+                path,
+                format!(
+                    "project format version {} was written by a newer damage-twin; this one reads \
+                     versions up to {PROJECT_FORMAT_VERSION} — update damage-twin to open it",
+                    probe.format_version
+                ),
+            ));
+        }
+        if probe.format_version == 0 {
+            return Err(SceneError::invalid(
+                path,
+                "project format version 0 does not exist",
+            ));
+        }
+        let project: Project = ron::from_str(&text)
+            .map_err(|e| SceneError::invalid(path, format!("bad twin project: {e}")))?;
+        project
+            .validate()
+            .map_err(|m| SceneError::invalid(path, m))?;
+        Ok(project)
+    }
+
+    /// Writes `twin.ron` atomically (temporary file, fsync, rename, fsync of the folder), in
+    /// the current format version.
+    pub fn save(&self, path: &Path) -> Result<(), SceneError> {
+        self.validate()
+            .map_err(|m| SceneError::invalid(path, format!("cannot save: {m}")))?;
+        let current = Project {
+            format_version: PROJECT_FORMAT_VERSION,
+            ..self.clone()
+        };
+        let config = ron::ser::PrettyConfig::new().struct_names(true);
+        let text = ron::ser::to_string_pretty(&current, config)
+            .map_err(|e| SceneError::invalid(path, format!("cannot serialise: {e}")))?;
+        write_atomic(path, |w| {
+            use std::io::Write;
+            w.write_all(text.as_bytes())?;
+            w.write_all(b"\n")
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn survey(name: &str, date: &str) -> Survey {
+        Survey {
+            name: name.into(),
+            date: date.into(),
+            dataset: PathBuf::from(format!("surveys/{name}")),
+            model: Some(PathBuf::from(format!("surveys/{name}/model.ply"))),
+            metrics: None,
+        }
+    }
+
+    #[test]
+    fn project_round_trips_through_twin_ron() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(PROJECT_FILE);
+        let mut project = Project::new();
+        project.classes[0].colour = [0, 0, 255];
+        project.settings.background = [1.0, 1.0, 1.0];
+        project.settings.scale = ImageScale::Width(960);
+        assert_eq!(project.add_survey(survey("before", "2024-03-01")), Ok(0));
+        assert_eq!(project.add_survey(survey("after", "2024-09-15")), Ok(1));
+        project.save(&path).unwrap();
+        let loaded = Project::load(&path).unwrap();
+        assert_eq!(loaded, project);
+        assert_eq!(loaded.colour(DamageClass::Crack), [0, 0, 255]);
+        // Only twin.ron remains: the temporary file was renamed, not left behind.
+        let files: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(files.len(), 1);
+    }
+
+    #[test]
+    fn surveys_must_come_in_date_order_with_valid_dates() {
+        let mut project = Project::new();
+        project.add_survey(survey("b", "2024-05-01")).unwrap();
+        assert!(matches!(
+            project.add_survey(survey("a", "2023-01-01")),
+            Err(SurveyError::OutOfOrder { .. })
+        ));
+        assert!(matches!(
+            project.add_survey(survey("c", "2024-13-01")),
+            Err(SurveyError::BadDate { .. })
+        ));
+        assert!(matches!(
+            project.add_survey(survey("b", "2025-01-01")),
+            Err(SurveyError::Duplicate(_))
+        ));
+    }
+
+    #[test]
+    fn newer_format_version_is_refused_naming_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(PROJECT_FILE);
+        let text = format!(
+            "Project(format_version: {}, classes: [], surveys: [], hologram: true)",
+            PROJECT_FORMAT_VERSION + 1
+        );
+        std::fs::write(&path, text).unwrap();
+        let err = Project::load(&path).unwrap_err().to_string();
+        assert!(err.contains("twin.ron") && err.contains("newer"), "{err}");
+    }
+
+    #[test]
+    fn relative_paths_resolve_beside_the_project_file() {
+        let p = Project::resolve(Path::new("/proj/twin.ron"), Path::new("s1/model.ply"));
+        assert_eq!(p, PathBuf::from("/proj/s1/model.ply"));
+    }
+}
