@@ -1,0 +1,160 @@
+//! Tile binning and depth sort: which 16×16 tiles each projected Gaussian touches, and per tile
+//! its Gaussians front to back (gsplat's (tile, depth) key order, built by one depth sort and a
+//! stable counting scatter). It must not evaluate pixels.
+
+use glam::Vec2;
+
+use super::{Projected, TILE_SIZE};
+
+/// Tiles covering a `width × height` image: `(tiles_x, tiles_y)`; tile id = `ty * tiles_x + tx`.
+pub fn tile_grid(width: u32, height: u32) -> (u32, u32) {
+    (width.div_ceil(TILE_SIZE), height.div_ceil(TILE_SIZE))
+}
+
+/// Tiles `[x0, x1) × [y0, y1)` (as `[x0, y0, x1, y1]`) a projected Gaussian is binned into:
+/// gsplat's rectangle of `radius` around the mean, intersected with the tiles holding a pixel
+/// centre inside `extent` (the box where alpha can reach 1/255). Dropping the other tiles
+/// changes no pixel: every Gaussian there would be skipped by the alpha threshold.
+pub fn tile_rect(mean2d: Vec2, radius: u32, extent: Vec2, tiles_x: u32, tiles_y: u32) -> [u32; 4] {
+    if radius == 0 || !(extent.x > 0.0) || !(extent.y > 0.0) {
+        return [0, 0, 0, 0];
+    }
+    let ts = TILE_SIZE as f32;
+    let r = radius as f32;
+    let clamp = |v: f32, hi: u32| v.max(0.0).min(hi as f32) as u32;
+    // gsplat: floor / ceil of the radius rectangle in tile units.
+    let gx0 = clamp(((mean2d.x - r) / ts).floor(), tiles_x);
+    let gx1 = clamp(((mean2d.x + r) / ts).ceil(), tiles_x);
+    let gy0 = clamp(((mean2d.y - r) / ts).floor(), tiles_y);
+    let gy1 = clamp(((mean2d.y + r) / ts).ceil(), tiles_y);
+    // Pixel centres p + 0.5 with |p + 0.5 - mean| <= extent.
+    let px0 = (mean2d.x - extent.x - 0.5).ceil();
+    let px1 = (mean2d.x + extent.x - 0.5).floor();
+    let py0 = (mean2d.y - extent.y - 0.5).ceil();
+    let py1 = (mean2d.y + extent.y - 0.5).floor();
+    let ex0 = clamp((px0 / ts).floor(), tiles_x);
+    let ex1 = clamp((px1 / ts).floor() + 1.0, tiles_x);
+    let ey0 = clamp((py0 / ts).floor(), tiles_y);
+    let ey1 = clamp((py1 / ts).floor() + 1.0, tiles_y);
+    let (x0, x1) = (gx0.max(ex0), gx1.min(ex1));
+    let (y0, y1) = (gy0.max(ey0), gy1.min(ey1));
+    if x0 >= x1 || y0 >= y1 {
+        return [0, 0, 0, 0];
+    }
+    [x0, y0, x1, y1]
+}
+
+/// Sorted intersections of one frame, with the scratch that builds them.
+#[derive(Debug, Default)]
+pub(crate) struct TileBins {
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    /// Gaussian index per intersection, ordered by (tile, depth).
+    pub gaussian_ids: Vec<u32>,
+    /// Per tile its `[start, end)` range in `gaussian_ids`.
+    pub tile_ranges: Vec<[u32; 2]>,
+    /// `depth bits << 32 | gaussian` of the binned Gaussians, sorted.
+    depth_keys: Vec<u64>,
+    /// Tile rectangle per Gaussian (indexed by Gaussian).
+    rects: Vec<[u32; 4]>,
+    cursor: Vec<u32>,
+}
+
+impl TileBins {
+    pub fn tile_count(&self) -> usize {
+        (self.tiles_x * self.tiles_y) as usize
+    }
+
+    pub fn build(&mut self, projected: &Projected, width: u32, height: u32) {
+        let (tiles_x, tiles_y) = tile_grid(width, height);
+        self.tiles_x = tiles_x;
+        self.tiles_y = tiles_y;
+        let n = projected.radii.len();
+        let tiles = self.tile_count();
+        self.rects.clear();
+        self.rects.resize(n, [0; 4]);
+        self.depth_keys.clear();
+        self.cursor.clear();
+        self.cursor.resize(tiles, 0);
+        for g in 0..n {
+            let rect = tile_rect(
+                projected.means2d[g],
+                projected.radii[g],
+                projected.extents[g],
+                tiles_x,
+                tiles_y,
+            );
+            if rect[2] > rect[0] {
+                self.rects[g] = rect;
+                // Depths are > NEAR_PLANE > 0, so their bit patterns sort like the values;
+                // the index breaks ties deterministically.
+                let key = ((projected.depths[g].to_bits() as u64) << 32) | g as u64;
+                self.depth_keys.push(key);
+                for ty in rect[1]..rect[3] {
+                    for tx in rect[0]..rect[2] {
+                        self.cursor[(ty * tiles_x + tx) as usize] += 1;
+                    }
+                }
+            }
+        }
+        self.depth_keys.sort_unstable();
+        self.tile_ranges.clear();
+        let mut start = 0u32;
+        for count in self.cursor.iter_mut() {
+            self.tile_ranges.push([start, start + *count]);
+            *count = start;
+            start = self.tile_ranges.last().map_or(0, |r| r[1]);
+        }
+        self.gaussian_ids.clear();
+        self.gaussian_ids.resize(start as usize, 0);
+        for key in &self.depth_keys {
+            let g = (*key & 0xffff_ffff) as u32;
+            let rect = self.rects[g as usize];
+            for ty in rect[1]..rect[3] {
+                for tx in rect[0]..rect[2] {
+                    let slot = &mut self.cursor[(ty * tiles_x + tx) as usize];
+                    self.gaussian_ids[*slot as usize] = g;
+                    *slot += 1;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tile_rect_follows_radius_and_clips_to_the_image() {
+        let r = tile_rect(Vec2::new(20.0, 20.0), 5, Vec2::splat(100.0), 4, 4);
+        assert_eq!(r, [0, 0, 2, 2]);
+        let r = tile_rect(Vec2::new(-3.0, 20.0), 5, Vec2::splat(100.0), 4, 4);
+        assert_eq!(r, [0, 0, 1, 2]);
+    }
+
+    #[test]
+    fn tile_rect_drops_tiles_no_pixel_centre_of_the_extent_reaches() {
+        // Radius rectangle spans tiles 0..2 in x, but the 1/255 box ends at x = 15.4.
+        let r = tile_rect(Vec2::new(12.0, 8.0), 10, Vec2::new(3.4, 3.0), 4, 4);
+        assert_eq!(r, [0, 0, 1, 1]);
+        // Extent reaching the centre 16.5 of the first pixel of tile 1.
+        let r = tile_rect(Vec2::new(12.0, 8.0), 10, Vec2::new(4.6, 3.0), 4, 4);
+        assert_eq!(r, [0, 0, 2, 1]);
+    }
+
+    #[test]
+    fn bins_are_sorted_by_tile_then_depth() {
+        let mut p = Projected::default();
+        for (x, depth) in [(8.0, 3.0), (8.0, 1.0), (24.0, 2.0)] {
+            p.means2d.push(Vec2::new(x, 8.0));
+            p.radii.push(4);
+            p.extents.push(Vec2::splat(4.0));
+            p.depths.push(depth);
+        }
+        let mut bins = TileBins::default();
+        bins.build(&p, 32, 16);
+        assert_eq!(bins.tile_ranges, vec![[0, 2], [2, 3]]);
+        assert_eq!(bins.gaussian_ids, vec![1, 0, 2]);
+    }
+}

@@ -1,0 +1,426 @@
+//! Rasterize backward: per tile, replay the forward blend front to back (same code, same
+//! decisions) and accumulate each intersection's screen-space gradients; then reduce them per
+//! Gaussian serially, so results are identical for any thread count. It must not project.
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+use super::bin::TileBins;
+use super::forward::{
+    CH_DEPTH, CH_LABELS, CH_RGB, CH_T, LANES, Splat2d, falloff, footprint, power_limit, row_span,
+    state_channels,
+};
+use super::{
+    MAX_LABEL_CHANNELS, PixelGrads, Projected, RenderSettings, ScreenGrads, TILE_PIXELS, TILE_SIZE,
+    TRANSMITTANCE_MIN,
+};
+
+const TS: usize = TILE_SIZE as usize;
+
+/// Gradient slots per intersection / Gaussian: mean2d (2), conic (3), opacity, RGB, depth, labels.
+pub(crate) fn grad_stride(labels: usize) -> usize {
+    G_LABELS + labels
+}
+const G_MEAN: usize = 0;
+const G_CONIC: usize = 2;
+const G_OPACITY: usize = 5;
+const G_RGB: usize = 6;
+const G_DEPTH: usize = 9;
+const G_LABELS: usize = 10;
+
+/// Per-pixel inputs of one tile, gathered from the row-major gradients.
+struct TileInputs {
+    /// dL/d(R, G, B, depth) per pixel.
+    v_chan: [[f32; TILE_PIXELS]; 4],
+    v_labels: [[f32; TILE_PIXELS]; MAX_LABEL_CHANNELS],
+    /// `sum_k C_k g_k` over every blended channel (background excluded).
+    total_dot: [f32; TILE_PIXELS],
+    /// `v_alpha - background · v_rgb`: what `T_final` is worth.
+    v_t_final: [f32; TILE_PIXELS],
+    t_final: [f32; TILE_PIXELS],
+}
+
+#[allow(clippy::too_many_arguments)]
+fn gather_inputs(
+    tile: usize,
+    bins: &TileBins,
+    state: &[f32],
+    labels: usize,
+    background: Vec3,
+    v_out: &PixelGrads,
+    width: usize,
+    height: usize,
+    inputs: &mut TileInputs,
+) {
+    let tx = tile % bins.tiles_x as usize;
+    let ty = tile / bins.tiles_x as usize;
+    for p in 0..TILE_PIXELS {
+        let (x, y) = (tx * TS + p % TS, ty * TS + p / TS);
+        let t_final = state[CH_T * TILE_PIXELS + p];
+        inputs.t_final[p] = t_final;
+        if x >= width || y >= height {
+            for c in inputs.v_chan.iter_mut() {
+                c[p] = 0.0;
+            }
+            for c in inputs.v_labels[..labels].iter_mut() {
+                c[p] = 0.0;
+            }
+            inputs.total_dot[p] = 0.0;
+            inputs.v_t_final[p] = 0.0;
+            continue;
+        }
+        let pixel = y * width + x;
+        let v_rgb = Vec3::from_slice(&v_out.color[pixel * 3..pixel * 3 + 3]);
+        let v_depth = v_out.depth.map_or(0.0, |d| d[pixel]);
+        let v_alpha = v_out.alpha.map_or(0.0, |a| a[pixel]);
+        let mut dot = 0.0;
+        for c in 0..3 {
+            inputs.v_chan[c][p] = v_rgb[c];
+            dot += state[(CH_RGB + c) * TILE_PIXELS + p] * v_rgb[c];
+        }
+        inputs.v_chan[3][p] = v_depth;
+        dot += state[CH_DEPTH * TILE_PIXELS + p] * v_depth;
+        for k in 0..labels {
+            let v = v_out.labels.map_or(0.0, |l| l[pixel * labels + k]);
+            inputs.v_labels[k][p] = v;
+            dot += state[(CH_LABELS + k) * TILE_PIXELS + p] * v;
+        }
+        inputs.total_dot[p] = dot;
+        inputs.v_t_final[p] = v_alpha - background.dot(v_rgb);
+    }
+}
+
+/// Replays one tile and writes `grad_stride(L)` values per intersection of the tile.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn backward_tile_impl(
+    tile: usize,
+    out: &mut [f32],
+    projected: &Projected,
+    bins: &TileBins,
+    inputs: &TileInputs,
+    labels: usize,
+    alpha_max: f32,
+    alpha_threshold: f32,
+) {
+    let stride = grad_stride(labels);
+    let tx = tile % bins.tiles_x as usize;
+    let ty = tile / bins.tiles_x as usize;
+    let (ox, oy) = ((tx * TS) as f32, (ty * TS) as f32);
+    let mut t_buf = [1.0f32; TILE_PIXELS];
+    // Running `sum_{j <= i} w_j (c_j · g)` per pixel: the suffix `S_i · g` is total - prefix.
+    let mut prefix = [0.0f32; TILE_PIXELS];
+    let mut live = [true; TILE_PIXELS];
+    let [start, end] = bins.tile_ranges[tile];
+    let (mut dx, mut vis, mut raw, mut alpha) =
+        ([0.0; LANES], [0.0; LANES], [0.0; LANES], [0.0; LANES]);
+    let mut ok = [false; LANES];
+    let mut w = [0.0f32; LANES];
+    let mut cg = [0.0f32; LANES];
+    for (n, &g) in bins.gaussian_ids[start as usize..end as usize]
+        .iter()
+        .enumerate()
+    {
+        let g = g as usize;
+        let isect_out = &mut out[n * stride..(n + 1) * stride];
+        let sp = Splat2d::load(projected, g);
+        let [x0, y0, x1, y1] = footprint(projected, g, ox, oy);
+        let label_values = &projected.labels[g * labels..(g + 1) * labels];
+        let mut s_dx = [0.0f32; LANES];
+        let mut s_dy = [0.0f32; LANES];
+        let mut s_dxdx = [0.0f32; LANES];
+        let mut s_dxdy = [0.0f32; LANES];
+        let mut s_dydy = [0.0f32; LANES];
+        let mut s_op = [0.0f32; LANES];
+        let mut s_chan = [[0.0f32; LANES]; 4];
+        let mut s_lab = [[0.0f32; LANES]; MAX_LABEL_CHANNELS];
+        let power_max = power_limit(sp.opacity, alpha_threshold);
+        for y in y0..y1 {
+            let dy = sp.my - (oy + y as f32 + 0.5);
+            let (x0, x1) = row_span(&sp, power_max, dy, ox, x0, x1);
+            for half in [0, LANES] {
+                if x1 <= half || x0 >= half + LANES {
+                    continue;
+                }
+                let base = y * TS + half;
+                let live_seg: &mut [bool; LANES] =
+                    (&mut live[base..base + LANES]).try_into().expect("8 lanes");
+                if !live_seg.iter().any(|&l| l) {
+                    continue;
+                }
+                falloff(
+                    &sp,
+                    ox + half as f32 + 0.5,
+                    dy,
+                    alpha_max,
+                    alpha_threshold,
+                    &mut dx,
+                    &mut vis,
+                    &mut raw,
+                    &mut alpha,
+                    &mut ok,
+                );
+                let seg = |a: &[f32; TILE_PIXELS]| -> [f32; LANES] {
+                    a[base..base + LANES].try_into().expect("8 lanes")
+                };
+                let (vr, vg, vb, vd) = (
+                    seg(&inputs.v_chan[0]),
+                    seg(&inputs.v_chan[1]),
+                    seg(&inputs.v_chan[2]),
+                    seg(&inputs.v_chan[3]),
+                );
+                for l in 0..LANES {
+                    cg[l] = sp.color.x * vr[l]
+                        + sp.color.y * vg[l]
+                        + sp.color.z * vb[l]
+                        + sp.depth * vd[l];
+                }
+                for (k, &p) in label_values.iter().enumerate() {
+                    let v = seg(&inputs.v_labels[k]);
+                    for l in 0..LANES {
+                        cg[l] += p * v[l];
+                    }
+                }
+                let total = seg(&inputs.total_dot);
+                let v_tf = seg(&inputs.v_t_final);
+                let t_final = seg(&inputs.t_final);
+                let t_seg: &mut [f32; LANES] = (&mut t_buf[base..base + LANES])
+                    .try_into()
+                    .expect("8 lanes");
+                let p_seg: &mut [f32; LANES] = (&mut prefix[base..base + LANES])
+                    .try_into()
+                    .expect("8 lanes");
+                for l in 0..LANES {
+                    let valid = live_seg[l] & ok[l];
+                    let t = t_seg[l];
+                    let next_t = t * (1.0 - alpha[l]);
+                    let stop = valid & (next_t <= TRANSMITTANCE_MIN);
+                    let contrib = valid & !stop;
+                    live_seg[l] &= !stop;
+                    let wl = if contrib { alpha[l] * t } else { 0.0 };
+                    w[l] = wl;
+                    p_seg[l] += wl * cg[l];
+                    let suffix = total[l] - p_seg[l];
+                    let ra = 1.0 / (1.0 - alpha[l]);
+                    // dL/dalpha_i = T_i c_i·g - S_i·g / (1 - a_i) + T_final / (1 - a_i) · v_T,
+                    // S_i = sum_{j > i} c_j alpha_j T_j (each T_j already holds 1 - a_i).
+                    let v_alpha = t * cg[l] - suffix * ra + t_final[l] * ra * v_tf[l];
+                    // Clamped alpha has no gradient (gsplat: `opac * vis <= 0.999f`).
+                    let m = contrib & (raw[l] <= alpha_max);
+                    let v_sigma = if m { -raw[l] * v_alpha } else { 0.0 };
+                    s_op[l] += if m { vis[l] * v_alpha } else { 0.0 };
+                    let d = dx[l];
+                    s_dx[l] += v_sigma * d;
+                    s_dy[l] += v_sigma * dy;
+                    s_dxdx[l] += v_sigma * d * d;
+                    s_dxdy[l] += v_sigma * d * dy;
+                    s_dydy[l] += v_sigma * dy * dy;
+                    t_seg[l] = if contrib { next_t } else { t };
+                }
+                for l in 0..LANES {
+                    s_chan[0][l] += w[l] * vr[l];
+                    s_chan[1][l] += w[l] * vg[l];
+                    s_chan[2][l] += w[l] * vb[l];
+                    s_chan[3][l] += w[l] * vd[l];
+                }
+                for (acc, v_label) in s_lab.iter_mut().zip(&inputs.v_labels).take(labels) {
+                    let v = seg(v_label);
+                    for l in 0..LANES {
+                        acc[l] += w[l] * v[l];
+                    }
+                }
+            }
+        }
+        let sum = |a: &[f32; LANES]| a.iter().sum::<f32>();
+        let (sdx, sdy) = (sum(&s_dx), sum(&s_dy));
+        // sigma = 0.5 (a dx² + c dy²) + b dx dy with dx = mean.x - px.
+        isect_out[G_MEAN] = sp.a * sdx + sp.b * sdy;
+        isect_out[G_MEAN + 1] = sp.b * sdx + sp.c * sdy;
+        isect_out[G_CONIC] = 0.5 * sum(&s_dxdx);
+        isect_out[G_CONIC + 1] = sum(&s_dxdy);
+        isect_out[G_CONIC + 2] = 0.5 * sum(&s_dydy);
+        isect_out[G_OPACITY] = sum(&s_op);
+        for c in 0..3 {
+            isect_out[G_RGB + c] = sum(&s_chan[c]);
+        }
+        isect_out[G_DEPTH] = sum(&s_chan[3]);
+        for k in 0..labels {
+            isect_out[G_LABELS + k] = sum(&s_lab[k]);
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+fn backward_tile_avx2(
+    tile: usize,
+    out: &mut [f32],
+    projected: &Projected,
+    bins: &TileBins,
+    inputs: &TileInputs,
+    labels: usize,
+    alpha_max: f32,
+    alpha_threshold: f32,
+) {
+    backward_tile_impl(
+        tile,
+        out,
+        projected,
+        bins,
+        inputs,
+        labels,
+        alpha_max,
+        alpha_threshold,
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn backward_tile(
+    tile: usize,
+    out: &mut [f32],
+    projected: &Projected,
+    bins: &TileBins,
+    inputs: &TileInputs,
+    labels: usize,
+    alpha_max: f32,
+    alpha_threshold: f32,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        unsafe {
+            backward_tile_avx2(
+                tile,
+                out,
+                projected,
+                bins,
+                inputs,
+                labels,
+                alpha_max,
+                alpha_threshold,
+            )
+        };
+        return;
+    }
+    backward_tile_impl(
+        tile,
+        out,
+        projected,
+        bins,
+        inputs,
+        labels,
+        alpha_max,
+        alpha_threshold,
+    )
+}
+
+/// Screen-space gradients per intersection (rayon over tiles), reduced per Gaussian into
+/// `gauss_grads` (`grad_stride(L)` per Gaussian) in intersection order.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn rasterize_backward(
+    projected: &Projected,
+    bins: &TileBins,
+    state: &[f32],
+    labels: usize,
+    settings: &RenderSettings,
+    v_out: &PixelGrads,
+    width: u32,
+    height: u32,
+    isect_grads: &mut Vec<f32>,
+    gauss_grads: &mut Vec<f32>,
+) {
+    let stride = grad_stride(labels);
+    let n_isects = bins.gaussian_ids.len();
+    isect_grads.clear();
+    isect_grads.resize(n_isects * stride, 0.0);
+    // One slice per tile (a few hundred pointers per frame); the ranges are disjoint.
+    let mut slices: Vec<&mut [f32]> = Vec::with_capacity(bins.tile_ranges.len());
+    let mut rest: &mut [f32] = isect_grads;
+    for [start, end] in &bins.tile_ranges {
+        let (head, tail) = rest.split_at_mut((end - start) as usize * stride);
+        slices.push(head);
+        rest = tail;
+    }
+    let state_stride = state_channels(labels) * TILE_PIXELS;
+    let (w, h) = (width as usize, height as usize);
+    slices.into_par_iter().enumerate().for_each(|(tile, out)| {
+        let [start, end] = bins.tile_ranges[tile];
+        if start == end {
+            return;
+        }
+        let mut inputs = TileInputs {
+            v_chan: [[0.0; TILE_PIXELS]; 4],
+            v_labels: [[0.0; TILE_PIXELS]; MAX_LABEL_CHANNELS],
+            total_dot: [0.0; TILE_PIXELS],
+            v_t_final: [0.0; TILE_PIXELS],
+            t_final: [0.0; TILE_PIXELS],
+        };
+        let st = &state[tile * state_stride..(tile + 1) * state_stride];
+        gather_inputs(
+            tile,
+            bins,
+            st,
+            labels,
+            settings.background,
+            v_out,
+            w,
+            h,
+            &mut inputs,
+        );
+        backward_tile(
+            tile,
+            out,
+            projected,
+            bins,
+            &inputs,
+            labels,
+            settings.alpha_max,
+            settings.alpha_threshold,
+        );
+    });
+    let n = projected.radii.len();
+    gauss_grads.clear();
+    gauss_grads.resize(n * stride, 0.0);
+    for (i, &g) in bins.gaussian_ids.iter().enumerate() {
+        let g = g as usize;
+        let src = &isect_grads[i * stride..(i + 1) * stride];
+        for (d, s) in gauss_grads[g * stride..(g + 1) * stride]
+            .iter_mut()
+            .zip(src)
+        {
+            *d += s;
+        }
+    }
+}
+
+/// Splits the per-Gaussian gradient rows into [`ScreenGrads`].
+pub(crate) fn unpack_screen_grads(
+    gauss_grads: &[f32],
+    n: usize,
+    labels: usize,
+    screen: &mut ScreenGrads,
+) {
+    let stride = grad_stride(labels);
+    screen.v_means2d.clear();
+    screen.v_conics.clear();
+    screen.v_colors.clear();
+    screen.v_opacities.clear();
+    screen.v_depths.clear();
+    screen.v_labels.clear();
+    for g in 0..n {
+        let r = &gauss_grads[g * stride..(g + 1) * stride];
+        screen.v_means2d.push(Vec2::new(r[G_MEAN], r[G_MEAN + 1]));
+        screen
+            .v_conics
+            .push(Vec3::new(r[G_CONIC], r[G_CONIC + 1], r[G_CONIC + 2]));
+        screen.v_opacities.push(r[G_OPACITY]);
+        screen
+            .v_colors
+            .push(Vec3::new(r[G_RGB], r[G_RGB + 1], r[G_RGB + 2]));
+        screen.v_depths.push(r[G_DEPTH]);
+        screen
+            .v_labels
+            .extend_from_slice(&r[G_LABELS..G_LABELS + labels]);
+    }
+}

@@ -1,0 +1,197 @@
+//! Real spherical harmonics up to degree 3 with the 3DGS basis, sign convention and constants:
+//! the raw colour sum of one Gaussian seen from a direction, and its vector-Jacobian products.
+//! Pure maths on one Gaussian's coefficients (`[k * 3 + c]`, DC first): no rendering, no clamping.
+
+use glam::Vec3;
+
+pub use super::model::SH_C0;
+
+/// Degree-1 constant `sqrt(3 / (4 pi))`.
+pub const SH_C1: f32 = 0.488_602_52;
+/// Degree-2 constants (3DGS order).
+pub const SH_C2: [f32; 5] = [
+    1.092_548_4,
+    -1.092_548_4,
+    0.315_391_57,
+    -1.092_548_4,
+    0.546_274_2,
+];
+/// Degree-3 constants (3DGS order).
+pub const SH_C3: [f32; 7] = [
+    -0.590_043_6,
+    2.890_611_4,
+    -0.457_045_8,
+    0.373_176_33,
+    -0.457_045_8,
+    1.445_305_7,
+    -0.590_043_6,
+];
+
+/// Basis values `Y_k(dir)` for `k < (degree + 1)^2`; `dir` must be unit length. Entries past
+/// the degree are left untouched.
+#[inline]
+pub fn sh_basis(degree: u32, dir: Vec3, out: &mut [f32; 16]) {
+    out[0] = SH_C0;
+    if degree == 0 {
+        return;
+    }
+    let (x, y, z) = (dir.x, dir.y, dir.z);
+    out[1] = -SH_C1 * y;
+    out[2] = SH_C1 * z;
+    out[3] = -SH_C1 * x;
+    if degree == 1 {
+        return;
+    }
+    let (xx, yy, zz) = (x * x, y * y, z * z);
+    let (xy, yz, xz) = (x * y, y * z, x * z);
+    out[4] = SH_C2[0] * xy;
+    out[5] = SH_C2[1] * yz;
+    out[6] = SH_C2[2] * (2.0 * zz - xx - yy);
+    out[7] = SH_C2[3] * xz;
+    out[8] = SH_C2[4] * (xx - yy);
+    if degree == 2 {
+        return;
+    }
+    out[9] = SH_C3[0] * y * (3.0 * xx - yy);
+    out[10] = SH_C3[1] * xy * z;
+    out[11] = SH_C3[2] * y * (4.0 * zz - xx - yy);
+    out[12] = SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
+    out[13] = SH_C3[4] * x * (4.0 * zz - xx - yy);
+    out[14] = SH_C3[5] * z * (xx - yy);
+    out[15] = SH_C3[6] * x * (xx - 3.0 * yy);
+}
+
+/// Partial derivatives `dY_k / d(x, y, z)`, treating the components as independent (the caller
+/// chains through the normalisation).
+#[inline]
+fn sh_basis_derivatives(degree: u32, dir: Vec3, out: &mut [Vec3; 16]) {
+    out[0] = Vec3::ZERO;
+    if degree == 0 {
+        return;
+    }
+    let (x, y, z) = (dir.x, dir.y, dir.z);
+    out[1] = Vec3::new(0.0, -SH_C1, 0.0);
+    out[2] = Vec3::new(0.0, 0.0, SH_C1);
+    out[3] = Vec3::new(-SH_C1, 0.0, 0.0);
+    if degree == 1 {
+        return;
+    }
+    let (xx, yy, zz) = (x * x, y * y, z * z);
+    out[4] = SH_C2[0] * Vec3::new(y, x, 0.0);
+    out[5] = SH_C2[1] * Vec3::new(0.0, z, y);
+    out[6] = SH_C2[2] * Vec3::new(-2.0 * x, -2.0 * y, 4.0 * z);
+    out[7] = SH_C2[3] * Vec3::new(z, 0.0, x);
+    out[8] = SH_C2[4] * Vec3::new(2.0 * x, -2.0 * y, 0.0);
+    if degree == 2 {
+        return;
+    }
+    out[9] = SH_C3[0] * Vec3::new(6.0 * x * y, 3.0 * xx - 3.0 * yy, 0.0);
+    out[10] = SH_C3[1] * Vec3::new(y * z, x * z, x * y);
+    out[11] = SH_C3[2] * Vec3::new(-2.0 * x * y, 4.0 * zz - xx - 3.0 * yy, 8.0 * y * z);
+    out[12] = SH_C3[3] * Vec3::new(-6.0 * x * z, -6.0 * y * z, 6.0 * zz - 3.0 * xx - 3.0 * yy);
+    out[13] = SH_C3[4] * Vec3::new(4.0 * zz - 3.0 * xx - yy, -2.0 * x * y, 8.0 * x * z);
+    out[14] = SH_C3[5] * Vec3::new(2.0 * x * z, -2.0 * y * z, xx - yy);
+    out[15] = SH_C3[6] * Vec3::new(3.0 * xx - 3.0 * yy, -6.0 * x * y, 0.0);
+}
+
+/// The raw SH sum `sum_k Y_k(dir) c_k` per RGB channel (colour = `max(sum + 0.5, 0)`).
+/// `coeffs` holds at least `(degree + 1)^2 * 3` values; `dir` must be unit length.
+#[inline]
+pub fn eval_sh(degree: u32, coeffs: &[f32], dir: Vec3) -> Vec3 {
+    let mut basis = [0.0f32; 16];
+    sh_basis(degree, dir, &mut basis);
+    let n = super::model::sh_coeffs_for_degree(degree);
+    let mut sum = Vec3::ZERO;
+    for (k, b) in basis[..n].iter().enumerate() {
+        sum += *b * Vec3::new(coeffs[k * 3], coeffs[k * 3 + 1], coeffs[k * 3 + 2]);
+    }
+    sum
+}
+
+/// Backward of [`eval_sh`]: adds `Y_k * v_sum` into `v_coeffs` and returns the gradient with
+/// respect to the (unit) direction's components.
+#[inline]
+pub fn eval_sh_backward(
+    degree: u32,
+    coeffs: &[f32],
+    dir: Vec3,
+    v_sum: Vec3,
+    v_coeffs: &mut [f32],
+) -> Vec3 {
+    let mut basis = [0.0f32; 16];
+    sh_basis(degree, dir, &mut basis);
+    let n = super::model::sh_coeffs_for_degree(degree);
+    for (k, b) in basis[..n].iter().enumerate() {
+        v_coeffs[k * 3] += b * v_sum.x;
+        v_coeffs[k * 3 + 1] += b * v_sum.y;
+        v_coeffs[k * 3 + 2] += b * v_sum.z;
+    }
+    if degree == 0 {
+        return Vec3::ZERO;
+    }
+    let mut d_basis = [Vec3::ZERO; 16];
+    sh_basis_derivatives(degree, dir, &mut d_basis);
+    let mut v_dir = Vec3::ZERO;
+    for (k, d) in d_basis[..n].iter().enumerate().skip(1) {
+        let c = Vec3::new(coeffs[k * 3], coeffs[k * 3 + 1], coeffs[k * 3 + 2]);
+        v_dir += *d * c.dot(v_sum);
+    }
+    v_dir
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn coeffs() -> Vec<f32> {
+        (0..48)
+            .map(|i| ((i * 37 % 17) as f32 - 8.0) * 0.05)
+            .collect()
+    }
+
+    #[test]
+    fn dc_only_is_constant_over_directions() {
+        let c = coeffs();
+        let a = eval_sh(0, &c, Vec3::X);
+        let b = eval_sh(0, &c, Vec3::new(0.0, 0.6, 0.8));
+        assert_eq!(a, b);
+        assert!((a.x - SH_C0 * c[0]).abs() < 1e-7);
+    }
+
+    #[test]
+    fn degree_one_band_matches_3dgs_sign_convention() {
+        let mut c = vec![0.0; 12];
+        c[3] = 1.0; // k = 1 (-C1 * y), red channel
+        let s = eval_sh(1, &c, Vec3::Y);
+        assert!((s.x + SH_C1).abs() < 1e-7);
+    }
+
+    #[test]
+    fn direction_gradient_matches_finite_differences_for_every_degree() {
+        let c = coeffs();
+        let v = Vec3::new(0.3, -0.7, 1.1);
+        for degree in 0..=3 {
+            let dir = Vec3::new(0.2, -0.5, 0.84);
+            let mut v_coeffs = vec![0.0; 48];
+            let v_dir = eval_sh_backward(degree, &c, dir, v, &mut v_coeffs);
+            let f = |d: Vec3| eval_sh(degree, &c, d).dot(v) as f64;
+            for axis in 0..3 {
+                let eps = 1e-3;
+                let mut e = Vec3::ZERO;
+                e[axis] = eps;
+                let fd = (f(dir + e) - f(dir - e)) / (2.0 * eps as f64);
+                assert!(
+                    (fd - v_dir[axis] as f64).abs() < 2e-3 * (1.0 + fd.abs()),
+                    "degree {degree} axis {axis}: fd {fd} analytic {}",
+                    v_dir[axis]
+                );
+            }
+            // Coefficient gradient is the basis itself.
+            let mut basis = [0.0; 16];
+            sh_basis(degree, dir, &mut basis);
+            for k in 0..crate::splats::model::sh_coeffs_for_degree(degree) {
+                assert!((v_coeffs[k * 3 + 1] - basis[k] * v.y).abs() < 1e-7);
+            }
+        }
+    }
+}
