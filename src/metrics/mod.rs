@@ -4,7 +4,9 @@
 pub mod image_quality;
 pub mod mask_agreement;
 pub mod memory;
+pub mod ssim;
 
 pub use image_quality::psnr;
 pub use mask_agreement::MaskAgreement;
 pub use memory::peak_rss_mb;
+pub use ssim::ssim;

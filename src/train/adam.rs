@@ -1,0 +1,597 @@
+//! Adam over the splat parameter groups (3DGS's optimiser): per-group learning rates and on/off
+//! switches, frozen Gaussians untouched (parameters and moments), optional visible-only
+//! updates, and moment state that follows densification. Knows nothing of losses or images.
+
+use glam::{Vec3, Vec4};
+use rayon::prelude::*;
+
+use super::schedule::ExponentialLr;
+use crate::splats::Splats;
+
+/// The trainable parameter groups, in the order of every `[_; 7]` array in this module.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum ParamGroup {
+    Means,
+    LogScales,
+    Rotations,
+    RawOpacities,
+    ShDc,
+    ShRest,
+    RawLabels,
+}
+
+impl ParamGroup {
+    pub const ALL: [ParamGroup; 7] = [
+        ParamGroup::Means,
+        ParamGroup::LogScales,
+        ParamGroup::Rotations,
+        ParamGroup::RawOpacities,
+        ParamGroup::ShDc,
+        ParamGroup::ShRest,
+        ParamGroup::RawLabels,
+    ];
+
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            ParamGroup::Means => "means",
+            ParamGroup::LogScales => "log_scales",
+            ParamGroup::Rotations => "rotations",
+            ParamGroup::RawOpacities => "raw_opacities",
+            ParamGroup::ShDc => "sh_dc",
+            ParamGroup::ShRest => "sh_rest",
+            ParamGroup::RawLabels => "raw_labels",
+        }
+    }
+}
+
+/// Which groups are trained.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GroupFlags(pub [bool; 7]);
+
+impl GroupFlags {
+    pub const ALL_ON: GroupFlags = GroupFlags([true; 7]);
+    pub const ALL_OFF: GroupFlags = GroupFlags([false; 7]);
+
+    pub fn get(&self, g: ParamGroup) -> bool {
+        self.0[g.index()]
+    }
+
+    pub fn set(&mut self, g: ParamGroup, on: bool) {
+        self.0[g.index()] = on;
+    }
+}
+
+impl Default for GroupFlags {
+    fn default() -> Self {
+        GroupFlags::ALL_ON
+    }
+}
+
+/// Gradients in the splats' layout (raster's `SplatGrads` fields, borrowed).
+#[derive(Clone, Copy, Debug)]
+pub struct ParamGrads<'a> {
+    pub v_means: &'a [Vec3],
+    pub v_log_scales: &'a [Vec3],
+    /// W.r.t. the un-normalised quaternion, glam order (x, y, z, w).
+    pub v_rotations: &'a [Vec4],
+    pub v_raw_opacities: &'a [f32],
+    /// Same layout as `Splats::sh`.
+    pub v_sh: &'a [f32],
+    pub v_raw_labels: &'a [f32],
+}
+
+impl<'a> From<&'a crate::raster::SplatGrads> for ParamGrads<'a> {
+    fn from(g: &'a crate::raster::SplatGrads) -> Self {
+        ParamGrads {
+            v_means: &g.v_means,
+            v_log_scales: &g.v_log_scales,
+            v_rotations: &g.v_rotations,
+            v_raw_opacities: &g.v_raw_opacities,
+            v_sh: &g.v_sh,
+            v_raw_labels: &g.v_raw_labels,
+        }
+    }
+}
+
+/// Learning rates. Defaults are 3DGS's (`arguments/__init__.py`); the position rate is
+/// multiplied by the scene extent and decays exponentially like `get_expon_lr_func`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct LearningRates {
+    pub position_init: f32,
+    pub position_final: f32,
+    pub position_delay_mult: f32,
+    /// Steps over which the position rate decays (3DGS 30 000; a run sets its iteration count).
+    pub position_max_steps: u32,
+    pub sh_dc: f32,
+    pub sh_rest: f32,
+    /// 0.05 as in the original 3DGS release and gsplat; 3DGS lowered it to 0.025 in 2024.
+    /// Short CPU runs (2–3k steps) benefit from the faster opacity convergence.
+    pub opacity: f32,
+    pub log_scale: f32,
+    pub rotation: f32,
+    /// Label logits: not in 3DGS; a logit like opacity, trained a little slower so colour
+    /// gradients that leak into label channels through shared geometry stay small.
+    pub labels: f32,
+}
+
+impl Default for LearningRates {
+    fn default() -> Self {
+        LearningRates {
+            position_init: 1.6e-4,
+            position_final: 1.6e-6,
+            position_delay_mult: 0.01,
+            position_max_steps: 30_000,
+            sh_dc: 2.5e-3,
+            sh_rest: 2.5e-3 / 20.0,
+            opacity: 0.05,
+            log_scale: 5e-3,
+            rotation: 1e-3,
+            labels: 0.01,
+        }
+    }
+}
+
+impl LearningRates {
+    /// The rate of each group at a 1-based step for a scene of the given extent.
+    pub fn for_step(&self, step: u32, extent: f32) -> [f32; 7] {
+        let position = ExponentialLr {
+            init: self.position_init * extent,
+            final_: self.position_final * extent,
+            delay_steps: 0,
+            delay_mult: self.position_delay_mult,
+            max_steps: self.position_max_steps,
+        };
+        [
+            position.at(step),
+            self.log_scale,
+            self.rotation,
+            self.opacity,
+            self.sh_dc,
+            self.sh_rest,
+            self.labels,
+        ]
+    }
+}
+
+/// First and second moments of one group, `per_gaussian` values per Gaussian.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Moments {
+    m: Vec<f32>,
+    v: Vec<f32>,
+    step: u32,
+    per_gaussian: usize,
+}
+
+impl Moments {
+    fn zeros(n: usize, per_gaussian: usize) -> Moments {
+        Moments {
+            m: vec![0.0; n * per_gaussian],
+            v: vec![0.0; n * per_gaussian],
+            step: 0,
+            per_gaussian,
+        }
+    }
+}
+
+/// Gaussians per rayon task: large enough that scheduling is negligible next to the update.
+const GAUSSIANS_PER_TASK: usize = 2048;
+
+/// Adam state for every group of one `Splats`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Adam {
+    pub beta1: f32,
+    pub beta2: f32,
+    /// 1e-15 as 3DGS sets it (torch's default 1e-8 would damp the tiny position updates).
+    pub eps: f32,
+    groups: [Moments; 7],
+    len: usize,
+}
+
+/// Hyper-parameters of one update, shared by every task.
+#[derive(Clone, Copy)]
+struct Update<'a> {
+    lr: f32,
+    beta1: f32,
+    beta2: f32,
+    eps: f32,
+    bias1: f32,
+    bias2_sqrt: f32,
+    frozen: &'a [bool],
+    visible: Option<&'a [bool]>,
+}
+
+/// One Adam update of a contiguous run of values (vectorisable: no indexing in the loop).
+#[inline]
+fn adam_run(p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32], u: &Update) {
+    let step_size = u.lr / u.bias1;
+    let inv_bias2_sqrt = 1.0 / u.bias2_sqrt;
+    for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
+        *m = u.beta1 * *m + (1.0 - u.beta1) * g;
+        *v = u.beta2 * *v + (1.0 - u.beta2) * g * g;
+        *p -= step_size * *m / (v.sqrt() * inv_bias2_sqrt + u.eps);
+    }
+}
+
+/// Updates one group stored with `stride` values per Gaussian of which `offset..offset+len`
+/// belong to the group (`len == m.per_gaussian`); `grads` has the parameters' layout.
+fn update_group(
+    params: &mut [f32],
+    grads: &[f32],
+    mom: &mut Moments,
+    stride: usize,
+    offset: usize,
+    u: Update,
+) {
+    let len = mom.per_gaussian;
+    if len == 0 || params.is_empty() {
+        return;
+    }
+    let chunk = GAUSSIANS_PER_TASK;
+    params
+        .par_chunks_mut(stride * chunk)
+        .zip(grads.par_chunks(stride * chunk))
+        .zip(
+            mom.m
+                .par_chunks_mut(len * chunk)
+                .zip(mom.v.par_chunks_mut(len * chunk)),
+        )
+        .enumerate()
+        .for_each(|(t, ((p, g), (m, v)))| {
+            let first = t * chunk;
+            let count = p.len() / stride;
+            let skips = |gi: usize| u.frozen[gi] || u.visible.is_some_and(|vis| !vis[gi]);
+            // Fast path: a contiguous group with nothing skipped in this chunk is one flat run.
+            if stride == len && !(first..first + count).any(skips) {
+                adam_run(p, g, m, v, &u);
+                return;
+            }
+            for i in 0..count {
+                if skips(first + i) {
+                    continue;
+                }
+                let at = i * stride + offset;
+                adam_run(
+                    &mut p[at..at + len],
+                    &g[at..at + len],
+                    &mut m[i * len..(i + 1) * len],
+                    &mut v[i * len..(i + 1) * len],
+                    &u,
+                );
+            }
+        });
+}
+
+impl Adam {
+    /// Zero moments for every Gaussian of `splats`.
+    pub fn new(splats: &Splats) -> Adam {
+        let n = splats.len();
+        let k = splats.sh_coeffs();
+        let per = [3, 3, 4, 1, 3, (k - 1) * 3, splats.label_channels];
+        Adam {
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-15,
+            groups: per.map(|p| Moments::zeros(n, p)),
+            len: n,
+        }
+    }
+
+    /// Gaussians tracked.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Steps taken by a group (its bias-correction count).
+    pub fn steps(&self, g: ParamGroup) -> u32 {
+        self.groups[g.index()].step
+    }
+
+    /// One Adam step of every enabled group with the rates `lrs` (see `LearningRates::for_step`).
+    /// Frozen Gaussians (`splats.meta.frozen`) and, if `visible` is given, invisible ones keep
+    /// their parameters and moments (gsplat's "visible Adam"); otherwise updates are dense as in 3DGS.
+    pub fn step(
+        &mut self,
+        splats: &mut Splats,
+        grads: &ParamGrads,
+        lrs: &[f32; 7],
+        groups: &GroupFlags,
+        visible: Option<&[bool]>,
+    ) {
+        let n = splats.len();
+        assert_eq!(self.len, n, "Adam state out of step with the splats");
+        assert_eq!(splats.meta.frozen.len(), n, "frozen flags length");
+        assert_eq!(grads.v_means.len(), n, "gradient length");
+        assert_eq!(grads.v_sh.len(), splats.sh.len(), "SH gradient length");
+        assert_eq!(
+            grads.v_raw_labels.len(),
+            splats.raw_labels.len(),
+            "label gradient length"
+        );
+        let k3 = splats.sh_coeffs() * 3;
+        assert_eq!(
+            self.groups[ParamGroup::ShRest.index()].per_gaussian,
+            k3 - 3,
+            "SH degree changed under Adam"
+        );
+        if let Some(v) = visible {
+            assert_eq!(v.len(), n, "visibility length");
+        }
+        for group in ParamGroup::ALL {
+            let gi = group.index();
+            if !groups.0[gi] {
+                continue;
+            }
+            let mom = &mut self.groups[gi];
+            mom.step += 1;
+            let t = mom.step as i32;
+            let u = Update {
+                lr: lrs[gi],
+                beta1: self.beta1,
+                beta2: self.beta2,
+                eps: self.eps,
+                bias1: 1.0 - self.beta1.powi(t),
+                bias2_sqrt: (1.0 - self.beta2.powi(t)).sqrt(),
+                frozen: &splats.meta.frozen,
+                visible,
+            };
+            match group {
+                ParamGroup::Means => {
+                    let p: &mut [f32] = bytemuck::cast_slice_mut(&mut splats.means);
+                    update_group(p, bytemuck::cast_slice(grads.v_means), mom, 3, 0, u);
+                }
+                ParamGroup::LogScales => {
+                    let p: &mut [f32] = bytemuck::cast_slice_mut(&mut splats.log_scales);
+                    update_group(p, bytemuck::cast_slice(grads.v_log_scales), mom, 3, 0, u);
+                }
+                ParamGroup::Rotations => {
+                    let p: &mut [f32] = bytemuck::cast_slice_mut(&mut splats.rotations);
+                    update_group(p, bytemuck::cast_slice(grads.v_rotations), mom, 4, 0, u);
+                }
+                ParamGroup::RawOpacities => {
+                    update_group(
+                        &mut splats.raw_opacities,
+                        grads.v_raw_opacities,
+                        mom,
+                        1,
+                        0,
+                        u,
+                    );
+                }
+                ParamGroup::ShDc => update_group(&mut splats.sh, grads.v_sh, mom, k3, 0, u),
+                ParamGroup::ShRest => update_group(&mut splats.sh, grads.v_sh, mom, k3, 3, u),
+                ParamGroup::RawLabels => {
+                    let c = splats.label_channels;
+                    update_group(&mut splats.raw_labels, grads.v_raw_labels, mom, c, 0, u);
+                }
+            }
+        }
+    }
+
+    /// Zero moments for `n` Gaussians appended at the end (3DGS `densification_postfix`).
+    pub fn append(&mut self, n: usize) {
+        for g in &mut self.groups {
+            let new = g.m.len() + n * g.per_gaussian;
+            g.m.resize(new, 0.0);
+            g.v.resize(new, 0.0);
+        }
+        self.len += n;
+    }
+
+    /// Keeps the moments of Gaussians where `keep[g]` (the mask given to `Splats::retain`).
+    pub fn retain(&mut self, keep: &[bool]) {
+        assert_eq!(keep.len(), self.len, "retain mask length");
+        for g in &mut self.groups {
+            let s = g.per_gaussian;
+            let mut w = 0;
+            for (i, &k) in keep.iter().enumerate() {
+                if k {
+                    g.m.copy_within(i * s..(i + 1) * s, w * s);
+                    g.v.copy_within(i * s..(i + 1) * s, w * s);
+                    w += 1;
+                }
+            }
+            g.m.truncate(w * s);
+            g.v.truncate(w * s);
+        }
+        self.len = keep.iter().filter(|&&k| k).count();
+    }
+
+    /// Zeroes a group's moments (3DGS `replace_tensor_to_optimizer` after an opacity reset).
+    pub fn reset_group(&mut self, g: ParamGroup) {
+        let mom = &mut self.groups[g.index()];
+        mom.m.fill(0.0);
+        mom.v.fill(0.0);
+    }
+
+    /// A group's first and second moments, `per_gaussian` values per Gaussian.
+    pub fn moments(&self, g: ParamGroup) -> (&[f32], &[f32]) {
+        let mom = &self.groups[g.index()];
+        (&mom.m, &mom.v)
+    }
+
+    /// Zeroes the moments of one Gaussian in one group.
+    pub fn reset_gaussian(&mut self, g: ParamGroup, gaussian: usize) {
+        let mom = &mut self.groups[g.index()];
+        let s = mom.per_gaussian;
+        mom.m[gaussian * s..(gaussian + 1) * s].fill(0.0);
+        mom.v[gaussian * s..(gaussian + 1) * s].fill(0.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Quat;
+
+    fn model(n: usize) -> Splats {
+        let mut s = Splats::empty(1, 2);
+        for g in 0..n {
+            s.push(
+                Vec3::splat(g as f32),
+                Vec3::ZERO,
+                Quat::IDENTITY,
+                0.0,
+                &[0.5; 12],
+                &[0.0; 2],
+                g as u64,
+                0,
+            );
+        }
+        s
+    }
+
+    struct Grads {
+        v3: Vec<Vec3>,
+        v4: Vec<Vec4>,
+        op: Vec<f32>,
+        sh: Vec<f32>,
+        lb: Vec<f32>,
+    }
+
+    impl Grads {
+        fn constant(s: &Splats, v: f32) -> Grads {
+            Grads {
+                v3: vec![Vec3::splat(v); s.len()],
+                v4: vec![Vec4::splat(v); s.len()],
+                op: vec![v; s.len()],
+                sh: vec![v; s.sh.len()],
+                lb: vec![v; s.raw_labels.len()],
+            }
+        }
+        fn view(&self) -> ParamGrads<'_> {
+            ParamGrads {
+                v_means: &self.v3,
+                v_log_scales: &self.v3,
+                v_rotations: &self.v4,
+                v_raw_opacities: &self.op,
+                v_sh: &self.sh,
+                v_raw_labels: &self.lb,
+            }
+        }
+    }
+
+    /// torch.optim.Adam on one scalar, in f64.
+    fn reference(p0: f64, grads: &[f64], lr: f64) -> f64 {
+        let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-15f64);
+        let (mut p, mut m, mut v) = (p0, 0.0, 0.0);
+        for (t, &g) in grads.iter().enumerate() {
+            let t = t as i32 + 1;
+            m = b1 * m + (1.0 - b1) * g;
+            v = b2 * v + (1.0 - b2) * g * g;
+            let denom = v.sqrt() / (1.0 - b2.powi(t)).sqrt() + eps;
+            p -= lr / (1.0 - b1.powi(t)) * m / denom;
+        }
+        p
+    }
+
+    #[test]
+    fn steps_match_torch_adam() {
+        let mut s = model(3);
+        let mut adam = Adam::new(&s);
+        let seq = [0.3f32, -0.1, 0.05, 0.2, -0.4];
+        let lrs = [0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07];
+        for &g in &seq {
+            let grads = Grads::constant(&s, g);
+            adam.step(&mut s, &grads.view(), &lrs, &GroupFlags::ALL_ON, None);
+        }
+        let gs: Vec<f64> = seq.iter().map(|&g| g as f64).collect();
+        let want = |p0: f64, lr: f64| reference(p0, &gs, lr) as f32;
+        assert!((s.means[2].x - want(2.0, 0.01)).abs() < 1e-5);
+        assert!((s.log_scales[1].y - want(0.0, 0.02)).abs() < 1e-5);
+        assert!((s.rotations[0].w - want(1.0, 0.03)).abs() < 1e-5);
+        assert!((s.raw_opacities[0] - want(0.0, 0.04)).abs() < 1e-5);
+        assert!(
+            (s.sh_of(1)[2] - want(0.5, 0.05)).abs() < 1e-5,
+            "DC uses the DC rate"
+        );
+        assert!(
+            (s.sh_of(1)[3] - want(0.5, 0.06)).abs() < 1e-5,
+            "rest uses the rest rate"
+        );
+        assert!((s.labels_of(2)[1] - want(0.0, 0.07)).abs() < 1e-5);
+        assert_eq!(adam.steps(ParamGroup::Means), 5);
+    }
+
+    #[test]
+    fn frozen_and_invisible_gaussians_keep_parameters_and_moments() {
+        let mut s = model(4);
+        s.meta.frozen[1] = true;
+        let before = s.clone();
+        let mut adam = Adam::new(&s);
+        let grads = Grads::constant(&s, 1.0);
+        let visible = [true, true, false, true];
+        adam.step(
+            &mut s,
+            &grads.view(),
+            &[0.1; 7],
+            &GroupFlags::ALL_ON,
+            Some(&visible),
+        );
+        for g in 0..4 {
+            let moved = s.means[g] != before.means[g];
+            assert_eq!(moved, g == 0 || g == 3, "Gaussian {g}");
+            assert_eq!(s.sh_of(g) != before.sh_of(g), moved);
+        }
+        let (m, v) = adam.moments(ParamGroup::ShRest);
+        assert!(
+            m[9..18].iter().chain(&v[9..18]).all(|&x| x == 0.0),
+            "frozen moments untouched"
+        );
+        assert!(m[..9].iter().all(|&x| x != 0.0));
+    }
+
+    #[test]
+    fn disabled_groups_are_not_updated_or_counted() {
+        let mut s = model(2);
+        let before = s.clone();
+        let mut adam = Adam::new(&s);
+        let mut flags = GroupFlags::ALL_OFF;
+        flags.set(ParamGroup::RawLabels, true);
+        let grads = Grads::constant(&s, 1.0);
+        adam.step(&mut s, &grads.view(), &[0.1; 7], &flags, None);
+        assert_eq!(s.means, before.means);
+        assert_eq!(s.sh, before.sh);
+        assert_eq!(s.raw_opacities, before.raw_opacities);
+        assert_ne!(s.raw_labels, before.raw_labels);
+        assert_eq!(adam.steps(ParamGroup::Means), 0);
+        assert_eq!(adam.steps(ParamGroup::RawLabels), 1);
+    }
+
+    #[test]
+    fn append_and_retain_keep_moments_aligned() {
+        let mut s = model(3);
+        let mut adam = Adam::new(&s);
+        let mut grads = Grads::constant(&s, 0.0);
+        grads.op = vec![1.0, 2.0, 3.0];
+        adam.step(&mut s, &grads.view(), &[0.0; 7], &GroupFlags::ALL_ON, None);
+        adam.append(2);
+        assert_eq!(adam.len(), 5);
+        adam.retain(&[false, true, true, true, false]);
+        let (m, _) = adam.moments(ParamGroup::RawOpacities);
+        assert_eq!(m.len(), 3);
+        assert!((m[0] - 0.2).abs() < 1e-7 && (m[1] - 0.3).abs() < 1e-7 && m[2] == 0.0);
+        assert_eq!(adam.moments(ParamGroup::ShRest).0.len(), 3 * 9);
+    }
+
+    #[test]
+    fn position_rate_scales_with_extent_and_decays() {
+        let lr = LearningRates {
+            position_max_steps: 1000,
+            ..LearningRates::default()
+        };
+        let a = lr.for_step(0, 5.0);
+        let b = lr.for_step(1000, 5.0);
+        assert!((a[0] - 1.6e-4 * 5.0).abs() < 1e-9);
+        assert!((b[0] - 1.6e-6 * 5.0).abs() < 1e-11);
+        assert_eq!(a[ParamGroup::ShRest.index()], 2.5e-3 / 20.0);
+    }
+}

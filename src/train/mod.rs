@@ -1,0 +1,14 @@
+//! Optimisation of splats against images: losses with exact gradients, Adam, adaptive density
+//! control, and (from the trainer) the steerable training run and its job API.
+//! Reads no files and draws nothing: inputs arrive as buffers, results leave as events.
+
+pub mod adam;
+pub mod densify;
+pub mod guards;
+pub mod job;
+pub mod loss;
+pub mod schedule;
+pub mod spec;
+pub mod ssim;
+pub mod trainer;
+pub mod views;

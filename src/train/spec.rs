@@ -1,0 +1,179 @@
+//! `TrainSpec`: everything one training run is steered by (DESIGN.md "The trainer is steerable").
+//! Refinement and survey updates are configurations of this, not new trainers. Pure settings:
+//! no pixels (those live in `TrainView`), no loop (that is `trainer.rs`).
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::scene::{Camera, ImageScale, Mask, RgbImage};
+use crate::train::densify::DensifyConfig;
+
+/// Which parameter groups the optimiser may change. A group switched off keeps its values and
+/// its gradients are never computed into the update.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ParamGroups {
+    pub means: bool,
+    pub log_scales: bool,
+    pub rotations: bool,
+    pub raw_opacities: bool,
+    /// SH degree 0 coefficient (base colour).
+    pub sh_dc: bool,
+    /// SH degrees 1..=3 (view-dependent colour).
+    pub sh_rest: bool,
+    pub raw_labels: bool,
+}
+
+impl ParamGroups {
+    pub const ALL: ParamGroups = ParamGroups {
+        means: true,
+        log_scales: true,
+        rotations: true,
+        raw_opacities: true,
+        sh_dc: true,
+        sh_rest: true,
+        raw_labels: true,
+    };
+
+    /// Only the damage labels: geometry and colour stay as they are.
+    pub const LABELS_ONLY: ParamGroups = ParamGroups {
+        means: false,
+        log_scales: false,
+        rotations: false,
+        raw_opacities: false,
+        sh_dc: false,
+        sh_rest: false,
+        raw_labels: true,
+    };
+}
+
+impl Default for ParamGroups {
+    fn default() -> Self {
+        ParamGroups::ALL
+    }
+}
+
+/// Learning-rate overrides; `None` keeps the DESIGN.md / 3DGS default (`LearningRates`; the
+/// position rates are multiplied by the scene extent like the defaults).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LrOverrides {
+    /// Initial position rate (before the × extent).
+    pub means: Option<f32>,
+    /// Final position rate of the exponential decay (before the × extent).
+    pub means_final: Option<f32>,
+    pub log_scales: Option<f32>,
+    pub rotations: Option<f32>,
+    pub raw_opacities: Option<f32>,
+    pub sh_dc: Option<f32>,
+    pub sh_rest: Option<f32>,
+    pub raw_labels: Option<f32>,
+}
+
+/// 3DGS adaptive density control with its windows fitted to a run of `iterations` steps: 3DGS
+/// densifies from 500 to 15 000 of 30 000 steps, every 100, resetting opacity every 3 000. Short
+/// runs keep the 100-step rhythm (gradient statistics need that many views), start after a
+/// sixth of the run at most, stop at half of it, and reset opacity once, early enough that
+/// opacities recover before the end.
+pub fn densify_for_iterations(iterations: u32, seed: u64) -> DensifyConfig {
+    let full = iterations >= 30_000;
+    DensifyConfig {
+        start: 500.min(iterations / 6),
+        stop: if full { 15_000 } else { iterations / 2 },
+        every: 100,
+        opacity_reset_every: if full { 3000 } else { (iterations / 3).max(1) },
+        seed,
+        ..DensifyConfig::default()
+    }
+}
+
+/// How the Gaussian set may change during a run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum DensifyPolicy {
+    /// A fixed set: refinement of frozen geometry, label-only training.
+    Off,
+    /// 3DGS adaptive density control (its `budget` may cap the count).
+    Adaptive(DensifyConfig),
+    /// Adaptive density control fitted to the run, capped at `max` Gaussians.
+    Budget { max: usize },
+}
+
+/// What the loss compares the render to. RGB uses each view's `image` (an overlay target is just
+/// another RGB image, built by the damage module); labels use each view's per-class masks.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Targets {
+    /// Weight of the photometric loss `(1-λ)·L1 + λ·(1-SSIM)`; 0 disables it.
+    pub rgb_weight: f32,
+    /// λ of D-SSIM (DESIGN.md: 0.2).
+    pub ssim_lambda: f32,
+    /// Weight of the per-class binary cross-entropy on label channels; 0 disables it.
+    pub label_weight: f32,
+}
+
+impl Default for Targets {
+    fn default() -> Self {
+        Targets {
+            rgb_weight: 1.0,
+            ssim_lambda: 0.2,
+            label_weight: 0.0,
+        }
+    }
+}
+
+/// One training run's settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrainSpec {
+    /// Indices into the training views given to the trainer; `None` means all of them.
+    pub views: Option<Vec<usize>>,
+    /// Resolution the views are loaded at (used by whoever loads them: CLI, job, app).
+    pub scale: ImageScale,
+    pub iterations: u32,
+    /// Per Gaussian of the initial model: which ones may change (the rest are frozen but still
+    /// rendered). `None`: every Gaussian not marked frozen in `SplatMeta`. Gaussians created by
+    /// densification are trainable.
+    pub trainable: Option<Vec<bool>>,
+    pub groups: ParamGroups,
+    pub targets: Targets,
+    pub densify: DensifyPolicy,
+    pub lr: LrOverrides,
+    /// Final SH degree; the active degree ramps up by one every `sh_ramp_every` steps (3DGS: 1000
+    /// of 30k).
+    pub sh_degree: u32,
+    pub sh_ramp_every: u32,
+    pub background: Vec3,
+    pub seed: u64,
+    /// Steps between held-out evaluations (0: only at the end).
+    pub eval_every: u32,
+}
+
+impl TrainSpec {
+    /// The default from-scratch reconstruction: every view, adaptive density control, SH degree 3.
+    pub fn reconstruction(iterations: u32) -> TrainSpec {
+        TrainSpec {
+            views: None,
+            scale: ImageScale::Factor(1),
+            iterations,
+            trainable: None,
+            groups: ParamGroups::ALL,
+            targets: Targets::default(),
+            densify: DensifyPolicy::Adaptive(densify_for_iterations(iterations, 0)),
+            lr: LrOverrides::default(),
+            sh_degree: 3,
+            sh_ramp_every: (iterations / 30).clamp(1, 1000),
+            background: Vec3::ZERO,
+            seed: 0,
+            eval_every: 0,
+        }
+    }
+}
+
+/// One training view in memory, at the training scale: camera, RGB target, optional label masks
+/// (one per label channel, in `DamageClass::ALL` order) and an optional loss region.
+#[derive(Clone, Debug)]
+pub struct TrainView {
+    pub name: String,
+    pub camera: Camera,
+    pub image: RgbImage,
+    /// Per label channel a mask (absent class: an empty mask); empty when not supervised.
+    pub labels: Vec<Mask>,
+    /// Pixels outside the region (0) do not contribute to any loss.
+    pub region: Option<Mask>,
+}

@@ -1,0 +1,693 @@
+//! The training loop over a `TrainSpec`: seeded view order, forward raster, loss and its
+//! backward, raster backward, Adam, density control; NaN/Inf steps are rolled back. Deterministic
+//! for a seed and thread count; allocation-free per step once buffers have grown. No I/O here.
+
+use std::collections::HashMap;
+use std::time::Instant;
+
+use glam::Vec3;
+use serde::Serialize;
+
+use crate::metrics::psnr;
+use crate::raster::{Rasterizer, RenderOutput, RenderSettings, SplatGrads};
+use crate::splats::Splats;
+use crate::train::adam::{Adam, GroupFlags, LearningRates, ParamGrads, ParamGroup};
+use crate::train::densify::{Densifier, DensifyConfig, camera_extent};
+use crate::train::guards::{first_non_finite_grad, first_non_finite_param};
+use crate::train::loss::{LabelLossParams, LossWorkspace, label_loss, photometric_loss};
+use crate::train::schedule::sh_degree_for_step;
+use crate::train::spec::{DensifyPolicy, TrainSpec, TrainView, densify_for_iterations};
+
+/// Steps between rollback checkpoints (also taken after every density change). A rollback loses
+/// at most this many steps; a copy every 100 steps costs well under 1 % of training time.
+const CHECKPOINT_EVERY: u32 = 100;
+
+/// Label channels the loss is evaluated for without a per-step allocation (3 damage classes).
+const MAX_LABEL_CHANNELS: usize = 8;
+
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error("no training views")]
+    NoViews,
+    #[error("view index {index} in the spec is out of range ({count} views)")]
+    ViewIndex { index: usize, count: usize },
+    #[error("view {name}: image is {got} values, expected {expected} for its camera")]
+    ImageSize {
+        name: String,
+        got: usize,
+        expected: usize,
+    },
+    #[error("view {name}: {what} mask is {got} pixels, expected {expected}")]
+    MaskSize {
+        name: String,
+        what: String,
+        got: usize,
+        expected: usize,
+    },
+    #[error("the trainable mask has {got} entries for {expected} Gaussians")]
+    TrainableMask { got: usize, expected: usize },
+    #[error("the initial splats are inconsistent: {0}")]
+    Splats(String),
+    #[error("the initial splats contain NaN or Inf ({0})")]
+    NonFinite(&'static str),
+}
+
+/// Held-out image quality.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct EvalScores {
+    /// Mean PSNR over views, dB.
+    pub psnr: f64,
+    pub ssim: f64,
+    pub views: usize,
+}
+
+/// Seconds spent per stage, summed over steps.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct StageTimes {
+    /// Raster forward as a whole, and its parts when the rasterizer reports them.
+    pub forward: f64,
+    pub project: f64,
+    pub sort: f64,
+    pub rasterize: f64,
+    pub loss: f64,
+    /// Raster backward as a whole, and its two parts.
+    pub backward: f64,
+    pub rasterize_backward: f64,
+    pub project_backward: f64,
+    /// NaN/Inf checks and checkpoints.
+    pub checks: f64,
+    pub optimizer: f64,
+    pub densify: f64,
+    pub total: f64,
+}
+
+impl StageTimes {
+    /// Milliseconds per step of every stage.
+    pub fn per_step_ms(&self, steps: u32) -> StageTimes {
+        let k = 1000.0 / steps.max(1) as f64;
+        StageTimes {
+            forward: self.forward * k,
+            project: self.project * k,
+            sort: self.sort * k,
+            rasterize: self.rasterize * k,
+            loss: self.loss * k,
+            backward: self.backward * k,
+            rasterize_backward: self.rasterize_backward * k,
+            project_backward: self.project_backward * k,
+            checks: self.checks * k,
+            optimizer: self.optimizer * k,
+            densify: self.densify * k,
+            total: self.total * k,
+        }
+    }
+}
+
+/// What one step did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepReport {
+    /// 1-based index of the step.
+    pub step: u32,
+    /// Its loss (NaN when rolled back).
+    pub loss: f32,
+    /// Set when the step produced NaN/Inf and was undone.
+    pub rolled_back: Option<String>,
+}
+
+/// State restored by a rollback.
+#[derive(Clone)]
+struct Checkpoint {
+    splats: Splats,
+    adam: Adam,
+    densifier: Option<Densifier>,
+}
+
+/// One training run in progress.
+pub struct Trainer {
+    spec: TrainSpec,
+    splats: Splats,
+    views: Vec<TrainView>,
+    /// Loss region per view as weights (0/1), converted once.
+    regions: Vec<Option<Vec<f32>>>,
+    rasterizer: Rasterizer,
+    out: RenderOutput,
+    grads: SplatGrads,
+    adam: Adam,
+    densifier: Option<Densifier>,
+    lrs: LearningRates,
+    groups: GroupFlags,
+    extent: f32,
+    loss_ws: LossWorkspace,
+    label_params: LabelLossParams,
+    v_color: Vec<f32>,
+    v_labels: Vec<f32>,
+    rng: fastrand::Rng,
+    /// Shuffled view order of the current epoch and the position in it.
+    order: Vec<usize>,
+    order_pos: usize,
+    steps_done: u32,
+    timings: StageTimes,
+    checkpoint: Checkpoint,
+    checkpoint_step: u32,
+    /// Frozen flags of the input model by Gaussian id, restored when the run ends (the run's own
+    /// trainable mask travels in `meta.frozen` through densification).
+    input_frozen: Option<HashMap<u64, bool>>,
+}
+
+impl Trainer {
+    /// Prepares a run: selects the spec's views, applies the trainable mask, sizes every buffer.
+    pub fn new(
+        spec: TrainSpec,
+        mut splats: Splats,
+        views: Vec<TrainView>,
+    ) -> Result<Trainer, TrainError> {
+        splats.check_lengths().map_err(TrainError::Splats)?;
+        if let Some(what) = first_non_finite_param(&splats, None) {
+            return Err(TrainError::NonFinite(what));
+        }
+        let views = match &spec.views {
+            None => views,
+            Some(indices) => {
+                let count = views.len();
+                if let Some(&index) = indices.iter().find(|&&i| i >= count) {
+                    return Err(TrainError::ViewIndex { index, count });
+                }
+                indices.iter().map(|&i| views[i].clone()).collect()
+            }
+        };
+        if views.is_empty() {
+            return Err(TrainError::NoViews);
+        }
+        for view in &views {
+            check_view(view, splats.label_channels)?;
+        }
+        let input_frozen = match &spec.trainable {
+            None => None,
+            Some(mask) => {
+                if mask.len() != splats.len() {
+                    return Err(TrainError::TrainableMask {
+                        got: mask.len(),
+                        expected: splats.len(),
+                    });
+                }
+                let saved = splats
+                    .meta
+                    .ids
+                    .iter()
+                    .copied()
+                    .zip(splats.meta.frozen.iter().copied())
+                    .collect();
+                for (frozen, &trainable) in splats.meta.frozen.iter_mut().zip(mask) {
+                    *frozen = !trainable;
+                }
+                Some(saved)
+            }
+        };
+        if splats.sh_degree < spec.sh_degree {
+            splats.set_sh_degree(spec.sh_degree);
+        }
+
+        let centres: Vec<Vec3> = views.iter().map(|v| v.camera.position()).collect();
+        let extent = camera_extent(&centres).max(1e-6);
+        let mut lrs = LearningRates {
+            position_max_steps: spec.iterations,
+            ..LearningRates::default()
+        };
+        apply_overrides(&mut lrs, &spec);
+        let groups = group_flags(&spec);
+        let densifier = densify_config(&spec).map(|config| Densifier::new(config, splats.len()));
+        let adam = Adam::new(&splats);
+        let regions = views
+            .iter()
+            .map(|v| {
+                v.region.as_ref().map(|m| {
+                    m.data
+                        .iter()
+                        .map(|&b| if b != 0 { 1.0 } else { 0.0 })
+                        .collect()
+                })
+            })
+            .collect();
+        let grads = SplatGrads::zeros(&splats);
+        let checkpoint = Checkpoint {
+            splats: splats.clone(),
+            adam: adam.clone(),
+            densifier: densifier.clone(),
+        };
+        let rng = fastrand::Rng::with_seed(spec.seed);
+        Ok(Trainer {
+            regions,
+            rasterizer: Rasterizer::new(),
+            out: RenderOutput::default(),
+            grads,
+            adam,
+            densifier,
+            lrs,
+            groups,
+            extent,
+            loss_ws: LossWorkspace::new(),
+            label_params: LabelLossParams::default(),
+            v_color: Vec::new(),
+            v_labels: Vec::new(),
+            rng,
+            order: Vec::with_capacity(views.len()),
+            order_pos: 0,
+            steps_done: 0,
+            timings: StageTimes::default(),
+            checkpoint,
+            checkpoint_step: 0,
+            input_frozen,
+            spec,
+            splats,
+            views,
+        })
+    }
+
+    pub fn total_steps(&self) -> u32 {
+        self.spec.iterations
+    }
+
+    pub fn steps_done(&self) -> u32 {
+        self.steps_done
+    }
+
+    pub fn is_done(&self) -> bool {
+        self.steps_done >= self.spec.iterations
+    }
+
+    pub fn view_count(&self) -> usize {
+        self.views.len()
+    }
+
+    pub fn spec(&self) -> &TrainSpec {
+        &self.spec
+    }
+
+    pub fn splats(&self) -> &Splats {
+        &self.splats
+    }
+
+    /// Accumulated stage times.
+    pub fn timings(&self) -> &StageTimes {
+        &self.timings
+    }
+
+    /// The scene extent the position rate and density control are scaled by.
+    pub fn extent(&self) -> f32 {
+        self.extent
+    }
+
+    /// SH degree rendered at the current step.
+    pub fn active_sh_degree(&self) -> u32 {
+        sh_degree_for_step(
+            self.steps_done.max(1),
+            self.spec.sh_degree.min(self.splats.sh_degree),
+            self.spec.sh_ramp_every,
+        )
+    }
+
+    /// The trained model, with the input's frozen flags restored.
+    pub fn into_splats(mut self) -> Splats {
+        if let Some(saved) = &self.input_frozen {
+            for (frozen, id) in self
+                .splats
+                .meta
+                .frozen
+                .iter_mut()
+                .zip(&self.splats.meta.ids)
+            {
+                *frozen = saved.get(id).copied().unwrap_or(false);
+            }
+        }
+        self.splats
+    }
+
+    fn next_view(&mut self) -> usize {
+        if self.order_pos >= self.order.len() {
+            self.order.clear();
+            self.order.extend(0..self.views.len());
+            self.rng.shuffle(&mut self.order);
+            self.order_pos = 0;
+        }
+        let v = self.order[self.order_pos];
+        self.order_pos += 1;
+        v
+    }
+
+    /// One optimisation step on the next view.
+    pub fn step(&mut self) -> StepReport {
+        let step = self.steps_done + 1;
+        let started = Instant::now();
+        let view_index = self.next_view();
+        let view = &self.views[view_index];
+        let settings = RenderSettings::new(
+            self.spec.background,
+            sh_degree_for_step(
+                step,
+                self.spec.sh_degree.min(self.splats.sh_degree),
+                self.spec.sh_ramp_every,
+            ),
+        );
+
+        // Forward.
+        let t = Instant::now();
+        self.rasterizer
+            .forward(&self.splats, &view.camera, &settings, &mut self.out);
+        self.timings.forward += t.elapsed().as_secs_f64();
+        let parts = *self.rasterizer.timings();
+        self.timings.project += parts.project.as_secs_f64();
+        self.timings.sort += parts.sort.as_secs_f64();
+        self.timings.rasterize += parts.raster_forward.as_secs_f64();
+
+        // Loss and its gradient w.r.t. the render.
+        let t = Instant::now();
+        let region = self.regions[view_index].as_deref();
+        let targets = self.spec.targets;
+        self.v_color.resize(self.out.color.len(), 0.0);
+        let mut loss = 0.0f32;
+        if targets.rgb_weight > 0.0 {
+            let photometric = photometric_loss(
+                &mut self.loss_ws,
+                &self.out.color,
+                &view.image.data,
+                view.image.width,
+                view.image.height,
+                region,
+                targets.ssim_lambda,
+                &mut self.v_color,
+            );
+            loss += targets.rgb_weight * photometric.loss;
+            if targets.rgb_weight != 1.0 {
+                self.v_color
+                    .iter_mut()
+                    .for_each(|v| *v *= targets.rgb_weight);
+            }
+        } else {
+            self.v_color.fill(0.0);
+        }
+        let labels_on = targets.label_weight > 0.0
+            && self.splats.label_channels > 0
+            && view.labels.len() == self.splats.label_channels
+            && self.splats.label_channels <= MAX_LABEL_CHANNELS;
+        if labels_on {
+            self.v_labels.resize(self.out.labels.len(), 0.0);
+            let masks: [Option<&[u8]>; MAX_LABEL_CHANNELS] =
+                std::array::from_fn(|k| view.labels.get(k).map(|m| m.data.as_slice()));
+            let label = label_loss(
+                &self.out.labels,
+                self.splats.label_channels,
+                &masks[..self.splats.label_channels],
+                region,
+                &self.label_params,
+                &mut self.v_labels,
+            );
+            loss += targets.label_weight * label;
+            self.v_labels
+                .iter_mut()
+                .for_each(|v| *v *= targets.label_weight);
+        }
+        self.timings.loss += t.elapsed().as_secs_f64();
+        if !loss.is_finite() {
+            return self.roll_back(step, started, format!("loss is {loss}"));
+        }
+
+        // Backward.
+        let t = Instant::now();
+        self.grads.reset(&self.splats);
+        self.rasterizer.backward(
+            &self.splats,
+            &view.camera,
+            &settings,
+            &self.v_color,
+            None,
+            labels_on.then_some(self.v_labels.as_slice()),
+            &mut self.grads,
+        );
+        self.timings.backward += t.elapsed().as_secs_f64();
+        let parts = *self.rasterizer.timings();
+        self.timings.rasterize_backward += parts.raster_backward.as_secs_f64();
+        self.timings.project_backward += parts.project_backward.as_secs_f64();
+
+        let t = Instant::now();
+        let bad_grad = first_non_finite_grad(&self.grads, &self.splats);
+        self.timings.checks += t.elapsed().as_secs_f64();
+        if let Some(what) = bad_grad {
+            return self.roll_back(step, started, format!("gradient of {what} is not finite"));
+        }
+
+        // Optimiser.
+        let t = Instant::now();
+        let lrs = self.lrs.for_step(step, self.extent);
+        let grads = ParamGrads {
+            v_means: &self.grads.v_means,
+            v_log_scales: &self.grads.v_log_scales,
+            v_rotations: &self.grads.v_rotations,
+            v_raw_opacities: &self.grads.v_raw_opacities,
+            v_sh: &self.grads.v_sh,
+            v_raw_labels: &self.grads.v_raw_labels,
+        };
+        self.adam.step(
+            &mut self.splats,
+            &grads,
+            &lrs,
+            &self.groups,
+            Some(&self.grads.visible),
+        );
+        self.timings.optimizer += t.elapsed().as_secs_f64();
+
+        let t = Instant::now();
+        let bad_param = first_non_finite_param(&self.splats, Some(&self.grads.visible));
+        self.timings.checks += t.elapsed().as_secs_f64();
+        if let Some(what) = bad_param {
+            return self.roll_back(step, started, format!("{what} became non-finite"));
+        }
+
+        // Density control.
+        let t = Instant::now();
+        let mut changed = false;
+        if let Some(densifier) = &mut self.densifier {
+            if step < densifier.config.stop {
+                densifier.accumulate(
+                    &self.grads.v_means2d_norm,
+                    &self.rasterizer.projected().radii,
+                );
+            }
+            let report = densifier.after_step(step, &mut self.splats, &mut self.adam, self.extent);
+            changed = report.densified || report.opacity_reset;
+        }
+        self.timings.densify += t.elapsed().as_secs_f64();
+
+        self.steps_done = step;
+        if changed || step - self.checkpoint_step >= CHECKPOINT_EVERY {
+            // A full scan before every checkpoint: NaN in Gaussians no step looked at (culled,
+            // or made by density control) never survives into a checkpoint.
+            let t = Instant::now();
+            let bad = first_non_finite_param(&self.splats, None);
+            self.timings.checks += t.elapsed().as_secs_f64();
+            if let Some(what) = bad {
+                return self.roll_back(step, started, format!("{what} became non-finite"));
+            }
+            let t = Instant::now();
+            self.take_checkpoint();
+            self.timings.checks += t.elapsed().as_secs_f64();
+        }
+        self.timings.total += started.elapsed().as_secs_f64();
+        StepReport {
+            step,
+            loss,
+            rolled_back: None,
+        }
+    }
+
+    fn take_checkpoint(&mut self) {
+        self.checkpoint.splats.clone_from(&self.splats);
+        self.checkpoint.adam.clone_from(&self.adam);
+        self.checkpoint.densifier.clone_from(&self.densifier);
+        self.checkpoint_step = self.steps_done;
+    }
+
+    /// Undoes a bad step: when the model itself is damaged, restores the last checkpoint; the
+    /// step still counts, so a run always ends.
+    fn roll_back(&mut self, step: u32, started: Instant, reason: String) -> StepReport {
+        let t = Instant::now();
+        let mut reason = reason;
+        if first_non_finite_param(&self.splats, None).is_some()
+            || self.adam.len() != self.splats.len()
+        {
+            self.splats.clone_from(&self.checkpoint.splats);
+            self.adam.clone_from(&self.checkpoint.adam);
+            self.densifier.clone_from(&self.checkpoint.densifier);
+            self.grads = SplatGrads::zeros(&self.splats);
+            reason.push_str(&format!(
+                "; model restored to step {}",
+                self.checkpoint_step
+            ));
+        } else {
+            reason.push_str("; step skipped");
+        }
+        self.steps_done = step;
+        self.timings.checks += t.elapsed().as_secs_f64();
+        self.timings.total += started.elapsed().as_secs_f64();
+        StepReport {
+            step,
+            loss: f32::NAN,
+            rolled_back: Some(reason),
+        }
+    }
+
+    /// Mean PSNR and SSIM of the current model over `views`, at the current SH degree.
+    pub fn evaluate(&mut self, views: &[TrainView]) -> EvalScores {
+        let settings = RenderSettings::new(self.spec.background, self.active_sh_degree());
+        evaluate_with(
+            &mut self.rasterizer,
+            &mut self.out,
+            &self.splats,
+            views,
+            &settings,
+        )
+    }
+
+    /// Test hook: corrupts one Gaussian's base colour so the next step that sees it, or the next
+    /// checkpoint, must roll back.
+    #[doc(hidden)]
+    pub fn poison_for_test(&mut self, gaussian: usize) {
+        let k3 = self.splats.sh_coeffs() * 3;
+        self.splats.sh[gaussian * k3] = f32::NAN;
+    }
+}
+
+/// Renders every view and averages PSNR and SSIM.
+fn evaluate_with(
+    rasterizer: &mut Rasterizer,
+    out: &mut RenderOutput,
+    splats: &Splats,
+    views: &[TrainView],
+    settings: &RenderSettings,
+) -> EvalScores {
+    let mut scores = EvalScores::default();
+    for view in views {
+        rasterizer.forward(splats, &view.camera, settings, out);
+        scores.psnr += psnr(&out.color, &view.image.data);
+        scores.ssim += crate::metrics::ssim(
+            &out.color,
+            &view.image.data,
+            view.image.width,
+            view.image.height,
+        );
+    }
+    let n = views.len().max(1) as f64;
+    scores.psnr /= n;
+    scores.ssim /= n;
+    scores.views = views.len();
+    scores
+}
+
+/// Mean PSNR and SSIM of a model over views (None when there are no views).
+pub fn evaluate_views(
+    splats: &Splats,
+    views: &[TrainView],
+    background: Vec3,
+    sh_degree: u32,
+) -> Option<EvalScores> {
+    if views.is_empty() {
+        return None;
+    }
+    let settings = RenderSettings::new(background, sh_degree.min(splats.sh_degree));
+    let mut rasterizer = Rasterizer::new();
+    let mut out = RenderOutput::default();
+    Some(evaluate_with(
+        &mut rasterizer,
+        &mut out,
+        splats,
+        views,
+        &settings,
+    ))
+}
+
+fn check_view(view: &TrainView, label_channels: usize) -> Result<(), TrainError> {
+    let k = &view.camera.intrinsics;
+    let pixels = k.width as usize * k.height as usize;
+    if view.image.data.len() != pixels * 3
+        || view.image.width != k.width
+        || view.image.height != k.height
+    {
+        return Err(TrainError::ImageSize {
+            name: view.name.clone(),
+            got: view.image.data.len(),
+            expected: pixels * 3,
+        });
+    }
+    let masks = view
+        .labels
+        .iter()
+        .enumerate()
+        .map(|(k, m)| (format!("label {k}"), m))
+        .chain(view.region.iter().map(|m| ("region".to_string(), m)));
+    for (what, mask) in masks {
+        if mask.data.len() != pixels {
+            return Err(TrainError::MaskSize {
+                name: view.name.clone(),
+                what,
+                got: mask.data.len(),
+                expected: pixels,
+            });
+        }
+    }
+    if !view.labels.is_empty() && view.labels.len() != label_channels {
+        return Err(TrainError::MaskSize {
+            name: view.name.clone(),
+            what: format!(
+                "{} label masks for {label_channels} channels",
+                view.labels.len()
+            ),
+            got: view.labels.len(),
+            expected: label_channels,
+        });
+    }
+    Ok(())
+}
+
+fn apply_overrides(lrs: &mut LearningRates, spec: &TrainSpec) {
+    let o = &spec.lr;
+    let set = |target: &mut f32, value: Option<f32>| {
+        if let Some(v) = value {
+            *target = v;
+        }
+    };
+    set(&mut lrs.position_init, o.means);
+    set(&mut lrs.position_final, o.means_final);
+    set(&mut lrs.log_scale, o.log_scales);
+    set(&mut lrs.rotation, o.rotations);
+    set(&mut lrs.opacity, o.raw_opacities);
+    set(&mut lrs.sh_dc, o.sh_dc);
+    set(&mut lrs.sh_rest, o.sh_rest);
+    set(&mut lrs.labels, o.raw_labels);
+}
+
+fn group_flags(spec: &TrainSpec) -> GroupFlags {
+    let g = &spec.groups;
+    let mut flags = GroupFlags::ALL_ON;
+    flags.set(ParamGroup::Means, g.means);
+    flags.set(ParamGroup::LogScales, g.log_scales);
+    flags.set(ParamGroup::Rotations, g.rotations);
+    flags.set(ParamGroup::RawOpacities, g.raw_opacities);
+    flags.set(ParamGroup::ShDc, g.sh_dc);
+    flags.set(ParamGroup::ShRest, g.sh_rest);
+    flags.set(ParamGroup::RawLabels, g.raw_labels);
+    flags
+}
+
+fn densify_config(spec: &TrainSpec) -> Option<DensifyConfig> {
+    // The run's seed drives split sampling too, so one seed fixes the whole run.
+    let seed = spec.seed ^ 0x5eed_de75_1f1e_0000;
+    match &spec.densify {
+        DensifyPolicy::Off => None,
+        DensifyPolicy::Adaptive(config) => Some(DensifyConfig {
+            seed,
+            ..config.clone()
+        }),
+        DensifyPolicy::Budget { max } => Some(DensifyConfig {
+            budget: Some(*max),
+            ..densify_for_iterations(spec.iterations, seed)
+        }),
+    }
+}
