@@ -1,0 +1,113 @@
+//! Mask corruption for robustness studies: which views get noisy masks, and irregular blobs
+//! added to and cut out of their masks (like the published method's Figure 11). Works on mask
+//! buffers only; the clean masks are kept elsewhere and must never be passed here.
+
+use super::noise::value_noise;
+
+/// Exactly `round(fraction · n)` views, chosen by the seed.
+pub fn noisy_views(n: usize, fraction: f32, seed: u64) -> Vec<bool> {
+    let count = ((fraction * n as f32).round() as usize).min(n);
+    let mut order: Vec<usize> = (0..n).collect();
+    fastrand::Rng::with_seed(seed ^ 0x0B10_B500).shuffle(&mut order);
+    let mut noisy = vec![false; n];
+    for &i in &order[..count] {
+        noisy[i] = true;
+    }
+    noisy
+}
+
+/// Adds and removes blobs in one binary (0/1) mask of `width × height`; `building` marks pixels
+/// where added blobs may be centred (non-sky). Guarantees at least one pixel changes.
+pub fn corrupt_mask(
+    mask: &mut [u8],
+    width: usize,
+    height: usize,
+    building: &[bool],
+    adds: usize,
+    removes: usize,
+    rng: &mut fastrand::Rng,
+) {
+    let before: usize = mask.iter().map(|&v| v as usize).sum();
+    let scale = width as f32 / 960.0;
+    let on: Vec<usize> = (0..mask.len()).filter(|&i| mask[i] != 0).collect();
+    let candidates: Vec<usize> = (0..building.len()).filter(|&i| building[i]).collect();
+    for _ in 0..adds {
+        // Half the false positives sit next to real damage, half anywhere on the structure.
+        let pool = if !on.is_empty() && rng.bool() {
+            &on
+        } else {
+            &candidates
+        };
+        let centre = if pool.is_empty() {
+            rng.usize(0..mask.len())
+        } else {
+            pool[rng.usize(0..pool.len())]
+        };
+        let radius = (6.0 + 22.0 * rng.f32()) * scale.max(0.1);
+        blob(mask, width, height, centre, radius.max(2.0), 1, rng.u32(..));
+    }
+    for _ in 0..removes {
+        if on.is_empty() {
+            break;
+        }
+        let centre = on[rng.usize(0..on.len())];
+        let radius = (5.0 + 18.0 * rng.f32()) * scale.max(0.1);
+        blob(mask, width, height, centre, radius.max(2.0), 0, rng.u32(..));
+    }
+    let after: usize = mask.iter().map(|&v| v as usize).sum();
+    if after == before && adds + removes > 0 {
+        // Equal counts almost surely mean nothing changed; flip one pixel to keep the promise.
+        let i = rng.usize(0..mask.len());
+        mask[i] ^= 1;
+    }
+}
+
+/// Sets an irregular blob (radius modulated by angular noise) to `value`.
+fn blob(
+    mask: &mut [u8],
+    width: usize,
+    height: usize,
+    centre: usize,
+    radius: f32,
+    value: u8,
+    seed: u32,
+) {
+    let (cx, cy) = ((centre % width) as f32 + 0.5, (centre / width) as f32 + 0.5);
+    let reach = radius * 1.5;
+    let x0 = (cx - reach).floor().max(0.0) as usize;
+    let y0 = (cy - reach).floor().max(0.0) as usize;
+    let x1 = ((cx + reach).ceil() as usize).min(width);
+    let y1 = ((cy + reach).ceil() as usize).min(height);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let d = glam::Vec2::new(x as f32 + 0.5 - cx, y as f32 + 0.5 - cy);
+            let len = d.length();
+            let dir = if len > 1e-6 { d / len } else { glam::Vec2::X };
+            let r = radius * (0.6 + 0.7 * value_noise(seed, 1.5 * dir.x + 9.0, 1.5 * dir.y + 9.0));
+            if len < r {
+                mask[y * width + x] = value;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn noisy_views_picks_the_rounded_fraction() {
+        let v = noisy_views(60, 0.25, 3);
+        assert_eq!(v.iter().filter(|&&b| b).count(), 15);
+        assert_eq!(noisy_views(10, 0.0, 3).iter().filter(|&&b| b).count(), 0);
+    }
+
+    #[test]
+    fn corruption_changes_an_empty_mask() {
+        let mut m = vec![0u8; 64 * 32];
+        let building = vec![true; 64 * 32];
+        let mut rng = fastrand::Rng::with_seed(1);
+        corrupt_mask(&mut m, 64, 32, &building, 1, 1, &mut rng);
+        assert!(m.iter().any(|&v| v != 0));
+    }
+}

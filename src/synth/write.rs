@@ -1,0 +1,122 @@
+//! Writers for synth's outputs: 8-bit RGB and grey PNGs, 16-bit depth PNGs (fast, deterministic
+//! zlib settings) and the RON manifest. Only encoding and files; no rendering decisions.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+use image::{ImageBuffer, Luma, Rgb};
+use serde::Serialize;
+
+use super::lighting::Lighting;
+use super::params::{SynthError, SynthParams};
+
+pub fn create_dir(path: &Path) -> Result<(), SynthError> {
+    std::fs::create_dir_all(path).map_err(|source| SynthError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn encoder(path: &Path) -> Result<PngEncoder<BufWriter<File>>, SynthError> {
+    let file = File::create(path).map_err(|source| SynthError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Ok(PngEncoder::new_with_quality(
+        BufWriter::new(file),
+        CompressionType::Fast,
+        FilterType::Adaptive,
+    ))
+}
+
+fn image_error(path: &Path) -> impl FnOnce(image::ImageError) -> SynthError + '_ {
+    move |source| SynthError::Image {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+pub fn rgb_png(path: &Path, width: u32, height: u32, rgb: Vec<u8>) -> Result<(), SynthError> {
+    let img: ImageBuffer<Rgb<u8>, _> = ImageBuffer::from_raw(width, height, rgb)
+        .ok_or_else(|| SynthError::InvalidParams(format!("{}: buffer size", path.display())))?;
+    img.write_with_encoder(encoder(path)?)
+        .map_err(image_error(path))
+}
+
+pub fn grey_png(path: &Path, width: u32, height: u32, grey: Vec<u8>) -> Result<(), SynthError> {
+    let img: ImageBuffer<Luma<u8>, _> = ImageBuffer::from_raw(width, height, grey)
+        .ok_or_else(|| SynthError::InvalidParams(format!("{}: buffer size", path.display())))?;
+    img.write_with_encoder(encoder(path)?)
+        .map_err(image_error(path))
+}
+
+/// A 0/1 mask as a 0/255 PNG.
+pub fn mask_png(path: &Path, width: u32, height: u32, mask: &[u8]) -> Result<(), SynthError> {
+    grey_png(
+        path,
+        width,
+        height,
+        mask.iter().map(|&v| if v != 0 { 255 } else { 0 }).collect(),
+    )
+}
+
+pub fn depth_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    depth_mm: Vec<u16>,
+) -> Result<(), SynthError> {
+    let img: ImageBuffer<Luma<u16>, _> = ImageBuffer::from_raw(width, height, depth_mm)
+        .ok_or_else(|| SynthError::InvalidParams(format!("{}: buffer size", path.display())))?;
+    img.write_with_encoder(encoder(path)?)
+        .map_err(image_error(path))
+}
+
+/// Camera z in metres to the depth PNG encoding (see `DEPTH_ENCODING`).
+pub fn depth_to_mm(z: f32) -> u16 {
+    if !(z > 0.0) {
+        0
+    } else {
+        (z * 1000.0).round().clamp(1.0, 65535.0) as u16
+    }
+}
+
+pub const DEPTH_ENCODING: &str = "truth/depth/<stem>.png: 16-bit grey PNG, camera-space z (along the \
+    optical axis, COLMAP convention) in millimetres; 0 = sky (no surface), 65535 = 65.535 m or farther";
+
+/// `truth/manifest.ron`: everything needed to regenerate and interpret a survey.
+#[derive(Serialize)]
+pub struct Manifest {
+    pub generator: String,
+    pub survey: u32,
+    pub params: SynthParams,
+    pub lighting: Lighting,
+    pub images: Vec<String>,
+    pub components: Vec<(u8, String)>,
+    pub depth: String,
+    pub masks: String,
+    pub mask_corrupted_images: Vec<String>,
+    pub damage: DamageSummary,
+    pub world: String,
+}
+
+#[derive(Serialize)]
+pub struct DamageSummary {
+    pub cracks: usize,
+    pub spalls: usize,
+    pub spalls_with_rebar: usize,
+}
+
+pub fn manifest(path: &Path, manifest: &Manifest) -> Result<(), SynthError> {
+    let text = ron::ser::to_string_pretty(manifest, ron::ser::PrettyConfig::default())
+        .map_err(|e| SynthError::InvalidParams(format!("{}: {e}", path.display())))?;
+    let io = |source: std::io::Error| SynthError::Io {
+        path: PathBuf::from(path),
+        source,
+    };
+    let mut f = File::create(path).map_err(io)?;
+    f.write_all(text.as_bytes()).map_err(io)?;
+    f.write_all(b"\n").map_err(io)
+}

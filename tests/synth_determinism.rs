@@ -1,0 +1,94 @@
+//! synth is deterministic (same seed, byte-identical files) and its mask noise corrupts exactly
+//! the requested fraction of views while `truth/` keeps the clean masks.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use damage_twin::damage::DamageClass;
+use damage_twin::synth::{self, SynthParams};
+
+fn params(out: &Path, mask_noise: f32) -> SynthParams {
+    SynthParams {
+        width: 160,
+        height: 90,
+        views: 4,
+        views_survey2: 2,
+        sparse_points: 500,
+        mask_noise,
+        ..SynthParams::demo(out)
+    }
+}
+
+/// Every file under `root`, relative path to bytes.
+fn files(root: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                let rel = path.strip_prefix(root).unwrap().to_path_buf();
+                out.insert(rel, std::fs::read(&path).unwrap());
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn same_seed_gives_identical_files_and_mask_noise_only_touches_the_chosen_views() {
+    let a = tempfile::tempdir().unwrap();
+    let b = tempfile::tempdir().unwrap();
+    let clean = tempfile::tempdir().unwrap();
+    synth::generate(&params(a.path(), 0.5), &|_, _| {}).unwrap();
+    synth::generate(&params(b.path(), 0.5), &|_, _| {}).unwrap();
+    synth::generate(&params(clean.path(), 0.0), &|_, _| {}).unwrap();
+
+    let fa = files(a.path());
+    let fb = files(b.path());
+    // The manifest records the output folder, which differs between the runs.
+    let same = |p: &Path| !p.ends_with("truth/manifest.ron");
+    assert_eq!(fa.keys().collect::<Vec<_>>(), fb.keys().collect::<Vec<_>>());
+    for (path, bytes) in fa.iter().filter(|(p, _)| same(p)) {
+        assert!(
+            &fb[path] == bytes,
+            "{} differs between runs",
+            path.display()
+        );
+    }
+    // 3 classes x (masks + truth) x views, images, components, depth, sparse model, manifest.
+    assert!(fa.len() > 60, "{} files", fa.len());
+    assert!(fa.contains_key(Path::new("survey-2/truth/new-damage/crack/view-000.png")));
+
+    let fc = files(clean.path());
+    for survey in ["survey-1", "survey-2"] {
+        let views = if survey == "survey-1" { 4 } else { 2 };
+        let mut corrupted = 0;
+        for v in 0..views {
+            let name = synth::view_name(v);
+            let mut differs = false;
+            for class in DamageClass::ALL {
+                let written = Path::new(survey).join("masks").join(class.id()).join(&name);
+                let truth = Path::new(survey)
+                    .join("truth/masks")
+                    .join(class.id())
+                    .join(&name);
+                // truth/ is the clean mask: identical to the masks of a run without noise.
+                assert!(
+                    fa[&truth] == fc[&written],
+                    "{} is not clean",
+                    truth.display()
+                );
+                differs |= fa[&written] != fa[&truth];
+            }
+            corrupted += differs as usize;
+        }
+        assert_eq!(
+            corrupted,
+            views / 2,
+            "{survey}: round(0.5 x {views}) views corrupted"
+        );
+    }
+}
