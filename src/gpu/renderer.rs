@@ -1,0 +1,743 @@
+//! `GpuRenderer`: "render these splats with this camera" on the GPU. Owns the splat buffers, the
+//! per-frame scratch and the stages, records the whole forward pass into a caller's encoder
+//! (viewer) or renders to CPU images (tests, CLI). No kernel code, no UI code.
+
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use glam::Vec3;
+
+use super::emit::{EmitBuffers, EmitStage};
+use super::kernel;
+use super::prefix_sum::PrefixSum;
+use super::project::{
+    FrameUniforms, PROJECTED_BYTES, ProjectOutputs, ProjectStage, ProjectedSplat, tile_bounds,
+};
+use super::radix_sort::{RadixSort, SortedIn, bits_for};
+use super::rasterize::{RasterBuffers, RasterizeStage};
+use super::splat_buffers::SplatBuffers;
+use super::tile_ranges::TileRangesStage;
+use super::timing::{Stage, TimestampQueries};
+use super::{GpuContext, GpuError, readback};
+use crate::raster::RenderSettings;
+use crate::scene::{Camera, RgbImage};
+use crate::splats::Splats;
+
+/// Render options (the GPU twin of `raster::RenderSettings`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpuRenderSettings {
+    /// Composited behind the splats: `C + T_final · background`.
+    pub background: Vec3,
+    /// Active SH degree; clamped to the model's.
+    pub sh_degree: u32,
+    /// `alpha = min(alpha_max, opacity · exp(-power))`: 0.99 in 3DGS (default), 0.999 in gsplat.
+    pub alpha_max: f32,
+}
+
+impl Default for GpuRenderSettings {
+    fn default() -> Self {
+        GpuRenderSettings::from(&RenderSettings::default())
+    }
+}
+
+impl From<&RenderSettings> for GpuRenderSettings {
+    /// The forward part of the CPU settings (the backward-only options do not apply).
+    fn from(s: &RenderSettings) -> Self {
+        GpuRenderSettings {
+            background: s.background,
+            sh_degree: s.sh_degree,
+            alpha_max: s.alpha_max,
+        }
+    }
+}
+
+/// A rendered frame read back to the CPU (same channels and conventions as `raster::RenderOutput`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GpuFrame {
+    pub width: u32,
+    pub height: u32,
+    /// RGB interleaved, composited on the background.
+    pub color: Vec<f32>,
+    /// `1 - T_final`.
+    pub alpha: Vec<f32>,
+    /// `Σ z_i α_i T_i` (not normalised).
+    pub depth: Vec<f32>,
+    /// `[pixel * label_channels + k] = Σ sigmoid(raw_label_ik) α_i T_i`.
+    pub labels: Vec<f32>,
+    pub label_channels: usize,
+}
+
+impl GpuFrame {
+    pub fn to_rgb_image(&self) -> RgbImage {
+        RgbImage {
+            width: self.width,
+            height: self.height,
+            data: self.color.clone(),
+        }
+    }
+}
+
+/// Milliseconds per stage of one frame.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct StageTimings {
+    /// "gpu-timestamps" or "wall-clock" (submit and wait per stage: includes driver overhead).
+    pub source: &'static str,
+    pub stages: Vec<(&'static str, f64)>,
+    /// Wall time of the whole frame, submit to completion.
+    pub total_ms: f64,
+    pub intersections: u32,
+}
+
+/// Per-frame scratch sized by the model capacity, the image size and the label count.
+struct FrameBuffers {
+    gaussian_capacity: usize,
+    width: u32,
+    height: u32,
+    label_channels: usize,
+    uniforms: wgpu::Buffer,
+    projected: wgpu::Buffer,
+    depth_keys: wgpu::Buffer,
+    depth_gids: wgpu::Buffer,
+    labels: wgpu::Buffer,
+    offsets: wgpu::Buffer,
+    ranges: wgpu::Buffer,
+    out_color: wgpu::Buffer,
+    out_depth: wgpu::Buffer,
+    out_labels: wgpu::Buffer,
+    texture: wgpu::Texture,
+    view: wgpu::TextureView,
+}
+
+impl FrameBuffers {
+    fn new(
+        device: &wgpu::Device,
+        gaussian_capacity: usize,
+        width: u32,
+        height: u32,
+        label_channels: usize,
+    ) -> Self {
+        let none = wgpu::BufferUsages::empty();
+        let n = gaussian_capacity as u64;
+        let pixels = width as u64 * height as u64;
+        let [tx, ty] = tile_bounds(width, height);
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("splat render"),
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba8Unorm,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&Default::default());
+        FrameBuffers {
+            gaussian_capacity,
+            width,
+            height,
+            label_channels,
+            uniforms: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("frame uniforms"),
+                size: std::mem::size_of::<FrameUniforms>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            projected: kernel::storage(device, "projected", n * PROJECTED_BYTES, none),
+            depth_keys: kernel::storage(device, "depth_keys", n * 4, none),
+            depth_gids: kernel::storage(device, "depth_gids", n * 4, none),
+            labels: kernel::storage(device, "labels", n * label_channels as u64 * 4, none),
+            offsets: kernel::storage(device, "isect_offsets", n * 4, none),
+            ranges: kernel::storage(device, "tile_ranges", tx as u64 * ty as u64 * 8, none),
+            out_color: kernel::storage(device, "out_color", pixels * 16, none),
+            out_depth: kernel::storage(device, "out_depth", pixels * 4, none),
+            out_labels: kernel::storage(
+                device,
+                "out_labels",
+                pixels * label_channels as u64 * 4,
+                none,
+            ),
+            texture,
+            view,
+        }
+    }
+}
+
+/// Intersection buffers and the tile sort, sized by the intersection capacity.
+struct IsectBuffers {
+    capacity: u32,
+    tile_keys: wgpu::Buffer,
+    isect_gids: wgpu::Buffer,
+    tile_sort: RadixSort,
+}
+
+impl IsectBuffers {
+    fn new(device: &wgpu::Device, sorter: &RadixSort, capacity: u32) -> IsectBuffers {
+        let none = wgpu::BufferUsages::empty();
+        IsectBuffers {
+            capacity,
+            tile_keys: kernel::storage(device, "tile_keys", capacity as u64 * 4, none),
+            isect_gids: kernel::storage(device, "isect_gids", capacity as u64 * 4, none),
+            tile_sort: sorter.resized(device, capacity),
+        }
+    }
+}
+
+/// Non-blocking read of the last frame's intersection total, so the next frames can grow the
+/// intersection buffers without stalling: copy (frame k), map (frame k+1), read when mapped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum ProbeState {
+    Idle,
+    Copied,
+    Mapping,
+    Mapped,
+    Failed,
+}
+
+struct CountProbe {
+    staging: wgpu::Buffer,
+    state: Arc<Mutex<ProbeState>>,
+}
+
+impl CountProbe {
+    fn new(device: &wgpu::Device) -> CountProbe {
+        CountProbe {
+            staging: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("isect count probe"),
+                size: 4,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            state: Arc::new(Mutex::new(ProbeState::Idle)),
+        }
+    }
+
+    fn state(&self) -> ProbeState {
+        self.state.lock().map(|s| *s).unwrap_or(ProbeState::Failed)
+    }
+
+    fn set(&self, s: ProbeState) {
+        if let Ok(mut g) = self.state.lock() {
+            *g = s;
+        }
+    }
+
+    /// Advances the probe; returns the total once a copy has been mapped.
+    fn poll(&self, device: &wgpu::Device) -> Option<u32> {
+        match self.state() {
+            ProbeState::Copied => {
+                // The encoder holding the copy was submitted by now (one render per frame).
+                self.set(ProbeState::Mapping);
+                let state = self.state.clone();
+                self.staging
+                    .slice(..)
+                    .map_async(wgpu::MapMode::Read, move |r| {
+                        if let Ok(mut g) = state.lock() {
+                            *g = if r.is_ok() {
+                                ProbeState::Mapped
+                            } else {
+                                ProbeState::Failed
+                            };
+                        }
+                    });
+                let _ = device.poll(wgpu::PollType::Poll);
+                None
+            }
+            ProbeState::Mapping => {
+                let _ = device.poll(wgpu::PollType::Poll);
+                None
+            }
+            ProbeState::Mapped => {
+                // wgpu 30: mapping a range can fail; a failed probe just reports nothing this frame.
+                let total = match self.staging.slice(..).get_mapped_range() {
+                    Ok(data) => Some(u32::from_le_bytes([data[0], data[1], data[2], data[3]])),
+                    Err(_) => None,
+                };
+                self.staging.unmap();
+                self.set(ProbeState::Idle);
+                total
+            }
+            ProbeState::Idle | ProbeState::Failed => None,
+        }
+    }
+
+    fn record_copy(&self, encoder: &mut wgpu::CommandEncoder, count: &wgpu::Buffer) {
+        if self.state() == ProbeState::Idle {
+            encoder.copy_buffer_to_buffer(count, 0, &self.staging, 0, 4);
+            self.set(ProbeState::Copied);
+        }
+    }
+}
+
+/// What `prepare` settled for the frame being recorded.
+#[derive(Clone, Copy, Debug)]
+struct FramePlan {
+    num_gaussians: u32,
+    tile_bounds: [u32; 2],
+    tile_bits: u32,
+}
+
+/// The GPU forward pass over one uploaded model.
+pub struct GpuRenderer {
+    ctx: GpuContext,
+    splats: SplatBuffers,
+    project: ProjectStage,
+    emit: EmitStage,
+    tile_ranges: TileRangesStage,
+    rasterize: RasterizeStage,
+    depth_sort: RadixSort,
+    scan: PrefixSum,
+    isect: IsectBuffers,
+    frame: Option<FrameBuffers>,
+    isect_count: wgpu::Buffer,
+    depth_count: wgpu::Buffer,
+    probe: CountProbe,
+    plan: Option<FramePlan>,
+    output_generation: u64,
+}
+
+/// Intersections per Gaussian assumed before the first frame reports the real total.
+const INITIAL_ISECTS_PER_GAUSSIAN: u32 = 8;
+const MIN_ISECT_CAPACITY: u32 = 1 << 16;
+
+impl GpuRenderer {
+    /// Compiles every pipeline once; buffers start empty.
+    pub fn new(ctx: &GpuContext) -> Result<GpuRenderer, GpuError> {
+        let device = &ctx.device;
+        let depth_sort = RadixSort::new(device, 1);
+        let isect = IsectBuffers::new(device, &depth_sort, MIN_ISECT_CAPACITY);
+        Ok(GpuRenderer {
+            splats: SplatBuffers::new(ctx),
+            project: ProjectStage::new(device),
+            emit: EmitStage::new(device),
+            tile_ranges: TileRangesStage::new(device),
+            rasterize: RasterizeStage::new(device),
+            scan: PrefixSum::new(device, 1),
+            depth_sort,
+            isect,
+            frame: None,
+            isect_count: kernel::storage(device, "isect_count", 4, wgpu::BufferUsages::empty()),
+            depth_count: kernel::storage(device, "depth_count", 4, wgpu::BufferUsages::empty()),
+            probe: CountProbe::new(device),
+            plan: None,
+            output_generation: 0,
+            ctx: ctx.clone(),
+        })
+    }
+
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    /// Replaces the model (in place when it fits; see [`SplatBuffers::upload`]).
+    pub fn upload(&mut self, splats: &Splats) -> Result<(), GpuError> {
+        self.splats.upload(&self.ctx, splats)
+    }
+
+    /// Rewrites Gaussians `range` of a model with the uploaded count and shape.
+    pub fn patch(
+        &mut self,
+        splats: &Splats,
+        range: std::ops::Range<usize>,
+    ) -> Result<(), GpuError> {
+        self.splats.patch(&self.ctx, splats, range)
+    }
+
+    pub fn splat_buffers(&self) -> &SplatBuffers {
+        &self.splats
+    }
+
+    /// The display texture of the last `render` (Rgba8Unorm, RGB composited, A = alpha).
+    pub fn output_texture(&self) -> Option<&wgpu::Texture> {
+        self.frame.as_ref().map(|f| &f.texture)
+    }
+
+    /// Bumps whenever the output texture is re-created (callers re-register it).
+    pub fn output_generation(&self) -> u64 {
+        self.output_generation
+    }
+
+    /// Room for tile/Gaussian intersections per frame (grows from the observed totals).
+    pub fn intersection_capacity(&self) -> u32 {
+        self.isect.capacity
+    }
+
+    fn isect_limit(&self) -> u32 {
+        let words = self
+            .ctx
+            .limits
+            .max_storage_buffer_binding_size
+            .min(self.ctx.limits.max_buffer_size)
+            / 4;
+        words.min(u32::MAX as u64) as u32
+    }
+
+    fn grow_intersections(&mut self, total: u32) {
+        if total <= self.isect.capacity {
+            return;
+        }
+        let limit = self.isect_limit();
+        if total > limit {
+            tracing::warn!(
+                total,
+                limit,
+                "more tile intersections than one GPU buffer holds; some splats are dropped"
+            );
+        }
+        let wanted = (total as u64 * 5 / 4).min(limit as u64) as u32;
+        if wanted > self.isect.capacity {
+            self.isect = IsectBuffers::new(&self.ctx.device, &self.isect.tile_sort, wanted);
+        }
+    }
+
+    /// Sizes the scratch for this frame and writes its uniforms and host-known lengths.
+    fn prepare(
+        &mut self,
+        camera: &Camera,
+        settings: &GpuRenderSettings,
+    ) -> Result<FramePlan, GpuError> {
+        let k = camera.intrinsics;
+        if k.width == 0 || k.height == 0 || !(k.fx > 0.0 && k.fy > 0.0) {
+            return Err(GpuError::InvalidCamera(format!(
+                "image {}×{} with focal lengths ({}, {})",
+                k.width, k.height, k.fx, k.fy
+            )));
+        }
+        let device = &self.ctx.device;
+        let capacity = self.splats.capacity().max(1);
+        let n = self.splats.len() as u32;
+        if (self.depth_sort.capacity() as usize) < capacity {
+            self.depth_sort = self.depth_sort.resized(device, capacity as u32);
+            self.scan = self.scan.resized(device, capacity as u32);
+        }
+        let labels = self.splats.label_channels();
+        let fits = self.frame.as_ref().is_some_and(|f| {
+            f.gaussian_capacity >= capacity
+                && f.width == k.width
+                && f.height == k.height
+                && f.label_channels == labels
+        });
+        if !fits {
+            self.frame = Some(FrameBuffers::new(
+                device, capacity, k.width, k.height, labels,
+            ));
+            self.output_generation += 1;
+        }
+        // Before any total was observed, assume a few tiles per Gaussian; frames then correct it.
+        let guess = n.saturating_mul(INITIAL_ISECTS_PER_GAUSSIAN);
+        if guess > self.isect.capacity && self.plan.is_none() {
+            self.grow_intersections(guess);
+        }
+        let frame = self
+            .frame
+            .as_ref()
+            .ok_or(GpuError::Device("frame buffers missing".into()))?;
+        let uniforms = FrameUniforms::new(camera, settings, &self.splats, self.isect.capacity);
+        let q = &self.ctx.queue;
+        q.write_buffer(&frame.uniforms, 0, bytemuck::bytes_of(&uniforms));
+        q.write_buffer(&self.depth_count, 0, bytemuck::bytes_of(&n));
+        self.scan.write_len(q, n);
+        let tb = tile_bounds(k.width, k.height);
+        let plan = FramePlan {
+            num_gaussians: n,
+            tile_bounds: tb,
+            tile_bits: bits_for((tb[0] * tb[1]).saturating_sub(1)).max(1),
+        };
+        self.plan = Some(plan);
+        Ok(plan)
+    }
+
+    /// Sorted tile keys and Gaussian ids after the tile sort.
+    fn sorted_isects(&self, plan: &FramePlan) -> (&wgpu::Buffer, &wgpu::Buffer) {
+        match RadixSort::result_location(plan.tile_bits) {
+            SortedIn::Input => (&self.isect.tile_keys, &self.isect.isect_gids),
+            SortedIn::Scratch => (
+                self.isect.tile_sort.scratch_keys(),
+                self.isect.tile_sort.scratch_values(),
+            ),
+        }
+    }
+
+    fn encode_stage(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        stage: Stage,
+        plan: &FramePlan,
+        timestamp_writes: Option<wgpu::ComputePassTimestampWrites<'_>>,
+    ) {
+        let Some(frame) = self.frame.as_ref() else {
+            return;
+        };
+        let device = &self.ctx.device;
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(stage.name()),
+            timestamp_writes,
+        });
+        let n = plan.num_gaussians;
+        // Depth keys are 32 bits: 8 passes, an even number, so the sorted ids are back in depth_gids.
+        let emit_buffers = EmitBuffers {
+            uniforms: &frame.uniforms,
+            projected: &frame.projected,
+            sorted_gids: &frame.depth_gids,
+            offsets: &frame.offsets,
+            tile_keys: &self.isect.tile_keys,
+            isect_gids: &self.isect.isect_gids,
+            isect_count: &self.isect_count,
+        };
+        match stage {
+            Stage::Project => self.project.encode(
+                device,
+                &mut pass,
+                &frame.uniforms,
+                &self.splats,
+                &ProjectOutputs {
+                    projected: &frame.projected,
+                    depth_keys: &frame.depth_keys,
+                    depth_gids: &frame.depth_gids,
+                    labels: &frame.labels,
+                },
+            ),
+            Stage::DepthSort => {
+                let at = self.depth_sort.encode(
+                    device,
+                    &mut pass,
+                    &frame.depth_keys,
+                    &frame.depth_gids,
+                    &self.depth_count,
+                    32,
+                );
+                debug_assert_eq!(at, SortedIn::Input);
+            }
+            Stage::Offsets => {
+                self.emit
+                    .encode_offsets(device, &mut pass, &self.scan, &emit_buffers, n)
+            }
+            Stage::Emit => self.emit.encode_emit(device, &mut pass, &emit_buffers, n),
+            Stage::TileSort => {
+                self.isect.tile_sort.encode(
+                    device,
+                    &mut pass,
+                    &self.isect.tile_keys,
+                    &self.isect.isect_gids,
+                    &self.isect_count,
+                    plan.tile_bits,
+                );
+            }
+            Stage::TileRanges => {
+                let (keys, _) = self.sorted_isects(plan);
+                self.tile_ranges.encode(
+                    device,
+                    &mut pass,
+                    &frame.uniforms,
+                    self.isect.tile_sort.sizes(),
+                    self.isect.tile_sort.dispatch_args(),
+                    keys,
+                    &frame.ranges,
+                    plan.tile_bounds[0] * plan.tile_bounds[1],
+                );
+            }
+            Stage::Rasterize => {
+                let (_, gids) = self.sorted_isects(plan);
+                self.rasterize.encode(
+                    device,
+                    &mut pass,
+                    &RasterBuffers {
+                        uniforms: &frame.uniforms,
+                        ranges: &frame.ranges,
+                        isect_gids: gids,
+                        projected: &frame.projected,
+                        labels: &frame.labels,
+                        out_color: &frame.out_color,
+                        out_depth: &frame.out_depth,
+                        out_labels: &frame.out_labels,
+                        out_texture: &frame.view,
+                    },
+                    plan.tile_bounds,
+                );
+            }
+        }
+    }
+
+    /// Records the forward pass into `encoder`; returns the display texture's view. No
+    /// read-back and no submit: the intersection total reaches the CPU a frame or two later
+    /// and only grows the buffers (a frame that overflowed drops some intersections). Submit
+    /// the encoder before the next call.
+    pub fn render(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        camera: &Camera,
+        settings: &GpuRenderSettings,
+    ) -> Result<&wgpu::TextureView, GpuError> {
+        if let Some(total) = self.probe.poll(&self.ctx.device) {
+            self.grow_intersections(total);
+        }
+        let plan = self.prepare(camera, settings)?;
+        encoder.clear_buffer(&self.isect_count, 0, None);
+        for stage in Stage::ALL {
+            self.encode_stage(encoder, stage, &plan, None);
+        }
+        self.probe.record_copy(encoder, &self.isect_count);
+        self.frame
+            .as_ref()
+            .map(|f| &f.view)
+            .ok_or(GpuError::Device("frame buffers missing".into()))
+    }
+
+    /// Renders, submits and waits; when the frame had more intersections than room, grows the
+    /// buffers and renders again, so the result is exact. Returns the intersection total.
+    pub fn render_blocking(
+        &mut self,
+        camera: &Camera,
+        settings: &GpuRenderSettings,
+    ) -> Result<u32, GpuError> {
+        for _ in 0..2 {
+            let plan = self.prepare(camera, settings)?;
+            let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+            encoder.clear_buffer(&self.isect_count, 0, None);
+            for stage in Stage::ALL {
+                self.encode_stage(&mut encoder, stage, &plan, None);
+            }
+            self.ctx.queue.submit([encoder.finish()]);
+            let total = self.read_intersection_count()?;
+            if total <= self.isect.capacity {
+                return Ok(total);
+            }
+            self.grow_intersections(total);
+        }
+        self.read_intersection_count()
+    }
+
+    /// Blocking render to CPU buffers (tests, CLI).
+    pub fn render_to_image(
+        &mut self,
+        camera: &Camera,
+        settings: &GpuRenderSettings,
+    ) -> Result<GpuFrame, GpuError> {
+        self.render_blocking(camera, settings)?;
+        self.read_frame()
+    }
+
+    /// Reads the last frame's outputs back.
+    pub fn read_frame(&self) -> Result<GpuFrame, GpuError> {
+        let frame = self
+            .frame
+            .as_ref()
+            .ok_or(GpuError::Readback("nothing rendered yet".into()))?;
+        let pixels = frame.width as usize * frame.height as usize;
+        let rgba = readback::read_f32(&self.ctx, &frame.out_color, pixels * 4)?;
+        let mut color = Vec::with_capacity(pixels * 3);
+        let mut alpha = Vec::with_capacity(pixels);
+        for p in rgba.chunks_exact(4) {
+            color.extend_from_slice(&p[..3]);
+            alpha.push(p[3]);
+        }
+        Ok(GpuFrame {
+            width: frame.width,
+            height: frame.height,
+            color,
+            alpha,
+            depth: readback::read_f32(&self.ctx, &frame.out_depth, pixels)?,
+            labels: readback::read_f32(
+                &self.ctx,
+                &frame.out_labels,
+                pixels * frame.label_channels,
+            )?,
+            label_channels: frame.label_channels,
+        })
+    }
+
+    /// The unclamped number of tile/Gaussian intersections of the last frame (blocking).
+    pub fn read_intersection_count(&self) -> Result<u32, GpuError> {
+        Ok(readback::read_u32(&self.ctx, &self.isect_count, 1)?[0])
+    }
+
+    /// The last frame's projection, per Gaussian in model order (blocking; stage tests).
+    pub fn read_projected(&self) -> Result<Vec<ProjectedSplat>, GpuError> {
+        let frame = self
+            .frame
+            .as_ref()
+            .ok_or(GpuError::Readback("nothing rendered yet".into()))?;
+        let n = self.splats.len();
+        let bytes = readback::read_bytes(&self.ctx, &frame.projected, n as u64 * PROJECTED_BYTES)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+
+    /// The last frame's Gaussian ids in depth order (blocking; stage tests).
+    pub fn read_depth_order(&self) -> Result<Vec<u32>, GpuError> {
+        let frame = self
+            .frame
+            .as_ref()
+            .ok_or(GpuError::Readback("nothing rendered yet".into()))?;
+        readback::read_u32(&self.ctx, &frame.depth_gids, self.splats.len())
+    }
+
+    /// The last frame's sorted intersections (Gaussian id per intersection, ordered by tile then
+    /// depth) and per tile its `[start, end)` range, like `raster::Rasterizer::tile_bins`.
+    pub fn read_tile_bins(&self) -> Result<(Vec<u32>, Vec<[u32; 2]>), GpuError> {
+        let frame = self
+            .frame
+            .as_ref()
+            .ok_or(GpuError::Readback("nothing rendered yet".into()))?;
+        let plan = self
+            .plan
+            .ok_or(GpuError::Readback("nothing rendered yet".into()))?;
+        let count = self.read_intersection_count()?.min(self.isect.capacity);
+        let (_, gids) = self.sorted_isects(&plan);
+        let gids = readback::read_u32(&self.ctx, gids, count as usize)?;
+        let tiles = (plan.tile_bounds[0] * plan.tile_bounds[1]) as usize;
+        let flat = readback::read_u32(&self.ctx, &frame.ranges, tiles * 2)?;
+        Ok((gids, flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect()))
+    }
+
+    /// One frame with per-stage timings: GPU timestamps when the device has them, otherwise
+    /// each stage submitted and waited for on its own (wall time, includes submit overhead).
+    /// Call [`GpuRenderer::render_blocking`] for the same view first, so that the buffers
+    /// already fit and the timed frame is an ordinary one.
+    pub fn render_timed(
+        &mut self,
+        camera: &Camera,
+        settings: &GpuRenderSettings,
+    ) -> Result<StageTimings, GpuError> {
+        let plan = self.prepare(camera, settings)?;
+        let start = Instant::now();
+        let mut stages = Vec::with_capacity(Stage::ALL.len());
+        let source = if let Some(queries) = TimestampQueries::new(&self.ctx) {
+            let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+            encoder.clear_buffer(&self.isect_count, 0, None);
+            for stage in Stage::ALL {
+                self.encode_stage(&mut encoder, stage, &plan, Some(queries.writes(stage)));
+            }
+            queries.resolve(&mut encoder);
+            self.ctx.queue.submit([encoder.finish()]);
+            self.ctx.wait_idle()?;
+            let ms = queries.read_ms(&self.ctx)?;
+            stages.extend(Stage::ALL.iter().zip(ms).map(|(s, ms)| (s.name(), ms)));
+            "gpu-timestamps"
+        } else {
+            for (i, stage) in Stage::ALL.into_iter().enumerate() {
+                let t0 = Instant::now();
+                let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+                if i == 0 {
+                    encoder.clear_buffer(&self.isect_count, 0, None);
+                }
+                self.encode_stage(&mut encoder, stage, &plan, None);
+                self.ctx.queue.submit([encoder.finish()]);
+                self.ctx.wait_idle()?;
+                stages.push((stage.name(), t0.elapsed().as_secs_f64() * 1e3));
+            }
+            "wall-clock"
+        };
+        let total_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(StageTimings {
+            source,
+            stages,
+            total_ms,
+            intersections: self.read_intersection_count()?,
+        })
+    }
+}
