@@ -5,6 +5,10 @@
 //! in WGSL, `train` optimises, `damage`/`timeline` use the engine, `synth` makes the demo building.
 
 pub mod damage;
+pub mod gpu;
 pub mod metrics;
+pub mod raster;
 pub mod scene;
 pub mod splats;
+pub mod synth;
+pub mod train;

@@ -1,6 +1,14 @@
 //! The headless client: parses arguments and drives the library's job API. No algorithms here.
 //! Every subcommand lives in its own file with an `Args` struct and a `run` function.
 
+mod bench;
+mod bench_render;
+mod eval;
+mod inspect;
+mod render;
+mod synth;
+mod train;
+
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -17,7 +25,22 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// Show what a dataset folder holds (format, cameras, images, points, masks, problems).
+    Inspect(inspect::Args),
+    /// Generate the procedural damaged building and its two drone surveys (the demo data).
+    Synth(synth::Args),
+    /// Train a splat model from a dataset (CPU engine); writes model.ply, metrics.json, curve.csv.
+    Train(train::Args),
+    /// PSNR and SSIM of a model on a dataset's held-out views.
+    Eval(eval::Args),
+    /// Render one view of a model to a PNG.
+    Render(render::Args),
+    /// Time per training iteration by stage, memory and bytes per Gaussian (JSON).
+    Bench(bench::Args),
+    /// Milliseconds per frame by stage, GPU (wgpu) and CPU side by side (JSON).
+    BenchRender(bench_render::Args),
+}
 
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -26,6 +49,13 @@ pub fn main() -> ExitCode {
             use clap::CommandFactory;
             Cli::command().print_help().map_err(anyhow::Error::from)
         }
+        Some(Command::Inspect(args)) => inspect::run(args),
+        Some(Command::Synth(args)) => synth::run(args),
+        Some(Command::Train(args)) => train::run(args),
+        Some(Command::Eval(args)) => eval::run(args),
+        Some(Command::Render(args)) => render::run(args),
+        Some(Command::Bench(args)) => bench::run(args),
+        Some(Command::BenchRender(args)) => bench_render::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
