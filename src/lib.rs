@@ -4,6 +4,7 @@
 //! `splats` is the model, `raster` renders and differentiates it on the CPU, `gpu` does the same
 //! in WGSL, `train` optimises, `damage`/`timeline` use the engine, `synth` makes the demo building.
 
+pub mod app;
 pub mod damage;
 pub mod gpu;
 pub mod metrics;

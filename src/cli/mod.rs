@@ -3,6 +3,7 @@
 
 mod bench;
 mod bench_render;
+mod demo;
 mod eval;
 mod inspect;
 mod render;
@@ -40,15 +41,15 @@ enum Command {
     Bench(bench::Args),
     /// Milliseconds per frame by stage, GPU (wgpu) and CPU side by side (JSON).
     BenchRender(bench_render::Args),
+    /// The built-in demo building: the app, or with --headless synth + train + eval + charts.
+    Demo(demo::Args),
 }
 
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        None => {
-            use clap::CommandFactory;
-            Cli::command().print_help().map_err(anyhow::Error::from)
-        }
+        // No subcommand: the desktop app on the built-in demo building.
+        None => damage_twin::app::run(damage_twin::app::Launch::Demo),
         Some(Command::Inspect(args)) => inspect::run(args),
         Some(Command::Synth(args)) => synth::run(args),
         Some(Command::Train(args)) => train::run(args),
@@ -56,6 +57,7 @@ pub fn main() -> ExitCode {
         Some(Command::Render(args)) => render::run(args),
         Some(Command::Bench(args)) => bench::run(args),
         Some(Command::BenchRender(args)) => bench_render::run(args),
+        Some(Command::Demo(args)) => demo::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,129 @@
+//! Training curves as files (plotters): loss, held-out PSNR and Gaussian count against wall time,
+//! as PNG and SVG, from the same `History` the live charts draw. Presentation only.
+
+use std::path::Path;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::app::history::History;
+
+type DrawResult = Result<(), Box<dyn std::error::Error>>;
+
+fn range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    if !(lo <= hi) {
+        return None;
+    }
+    let pad = ((hi - lo) * 0.05).max(1e-9);
+    Some((lo - pad, hi + pad))
+}
+
+fn panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    title: &str,
+    y_label: &str,
+    points: &[(f64, f64)],
+    colour: RGBColor,
+    markers: bool,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let x = range(points.iter().map(|p| p.0)).unwrap_or((0.0, 1.0));
+    let y = range(points.iter().map(|p| p.1)).unwrap_or((0.0, 1.0));
+    let mut chart = ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 18))
+        .margin(8)
+        .x_label_area_size(32)
+        .y_label_area_size(56)
+        .build_cartesian_2d(x.0..x.1, y.0..y.1)?;
+    chart
+        .configure_mesh()
+        .x_desc("wall time (s)")
+        .y_desc(y_label)
+        .light_line_style(WHITE.mix(0.0))
+        .draw()?;
+    chart.draw_series(LineSeries::new(
+        points.iter().copied(),
+        colour.stroke_width(2),
+    ))?;
+    if markers {
+        chart.draw_series(points.iter().map(|&p| Circle::new(p, 3, colour.filled())))?;
+    }
+    Ok(())
+}
+
+fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, history: &History) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE)?;
+    let areas = root.split_evenly((3, 1));
+    let loss: Vec<(f64, f64)> = history
+        .series(|s| s.loss)
+        .into_iter()
+        .map(|[x, y]| (x, y))
+        .collect();
+    let psnr: Vec<(f64, f64)> = history
+        .evals
+        .iter()
+        .filter(|e| e.psnr.is_finite())
+        .map(|e| (e.wall_s, e.psnr))
+        .collect();
+    let count: Vec<(f64, f64)> = history
+        .series(|s| s.gaussians as f64)
+        .into_iter()
+        .map(|[x, y]| (x, y))
+        .collect();
+    panel(
+        &areas[0],
+        "Training loss",
+        "loss",
+        &loss,
+        RGBColor(200, 60, 40),
+        false,
+    )?;
+    panel(
+        &areas[1],
+        "Held-out PSNR",
+        "dB",
+        &psnr,
+        RGBColor(40, 90, 200),
+        true,
+    )?;
+    panel(
+        &areas[2],
+        "Gaussians",
+        "count",
+        &count,
+        RGBColor(40, 150, 80),
+        false,
+    )?;
+    root.present()?;
+    Ok(())
+}
+
+/// Writes `training.png` and `training.svg` into `dir`.
+pub fn write_training_charts(
+    dir: &Path,
+    history: &History,
+) -> anyhow::Result<Vec<std::path::PathBuf>> {
+    let png = dir.join("training.png");
+    let svg = dir.join("training.svg");
+    draw(
+        BitMapBackend::new(&png, (900, 900)).into_drawing_area(),
+        history,
+    )
+    .map_err(|e| anyhow::anyhow!("drawing {}: {e}", png.display()))?;
+    draw(
+        SVGBackend::new(&svg, (900, 900)).into_drawing_area(),
+        history,
+    )
+    .map_err(|e| anyhow::anyhow!("drawing {}: {e}", svg.display()))?;
+    Ok(vec![png, svg])
+}

@@ -1,0 +1,51 @@
+//! Every state change the viewer can make, as data (rerun style): panels push `Command`s, the app
+//! applies them between frames, and tests or headless callers apply the same commands. No UI
+//! here and no effect of its own: `AppState::apply` performs them.
+
+use std::path::PathBuf;
+
+use crate::app::settings::Settings;
+
+/// Which file a dialog asks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DialogKind {
+    /// A dataset folder (COLMAP, transforms.json, synth output) or a project folder.
+    OpenFolder,
+    /// A `twin.ron` project or a `.ply` model.
+    OpenFile,
+    /// Folder to save the twin project into.
+    SaveProject,
+    ExportPly,
+    ExportPng,
+}
+
+/// A state change.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Command {
+    /// Open a dataset folder, a project (`twin.ron` or its folder) or a `.ply` model.
+    Open(PathBuf),
+    /// Ask the user for a path on a worker thread; the answer comes back as another command.
+    ShowDialog(DialogKind),
+    /// Save the twin project (`twin.ron` + model PLY) into a folder, atomically.
+    SaveProject(PathBuf),
+    /// Save into the project folder the twin came from (or ask where).
+    SaveProjectHere,
+    /// Write the current model as a standard 3DGS PLY.
+    ExportPly(PathBuf),
+    /// Write a PNG of the current view.
+    ExportPng(PathBuf),
+    StartTraining,
+    PauseTraining,
+    ResumeTraining,
+    StopTraining,
+    /// Look through survey view `index` and compare with its photo.
+    SnapToView(usize),
+    /// Leave the snapped view (navigation continues from it).
+    Unsnap,
+    /// Frame the whole scene again.
+    ResetView,
+    /// Replace the settings (panels edit a copy and submit it).
+    UpdateSettings(Box<Settings>),
+    /// Show a line in the log / status bar.
+    Notify(String),
+}

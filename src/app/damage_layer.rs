@@ -1,0 +1,137 @@
+//! Display of the damage layer (issue 7): class colours over the photo-real render. Per pixel on
+//! a CPU render (`composite`), or per Gaussian before the GPU upload (`display_splats`: blending
+//! is linear in colour, so tinting each Gaussian by its label probability matches tinting the
+//! blended label channels). Display only: no evaluation, no thresholds.
+
+use std::borrow::Cow;
+
+use crate::app::settings::DamageLayer;
+use crate::splats::Splats;
+use crate::splats::model::{SH_C0, sigmoid};
+
+/// sRGB byte to linear-ish [0, 1] (renders are stored as [0, 1] colour, no gamma change).
+fn unit(c: u8) -> f32 {
+    f32::from(c) / 255.0
+}
+
+/// Composites the damage layer into `color` (RGB interleaved) from `labels`
+/// (`[pixel * channels + k]`). Does nothing when the layer is off or there are no labels.
+pub fn composite(color: &mut [f32], labels: &[f32], channels: usize, layer: &DamageLayer) {
+    if !layer.enabled || channels == 0 {
+        return;
+    }
+    let pixels = color.len() / 3;
+    if labels.len() < pixels * channels {
+        return;
+    }
+    let opacity = layer.opacity.clamp(0.0, 1.0);
+    for (px, rgb) in color.chunks_exact_mut(3).enumerate() {
+        if layer.damage_only {
+            let grey = 0.25 * (rgb[0] + rgb[1] + rgb[2]) / 3.0;
+            rgb.iter_mut().for_each(|c| *c = grey);
+        }
+        let label = &labels[px * channels..(px + 1) * channels];
+        for (k, &value) in label.iter().enumerate().take(3) {
+            if !layer.visible[k] || !(value > 0.0) {
+                continue;
+            }
+            let w = (value.min(1.0) * opacity).clamp(0.0, 1.0);
+            let colour = layer.colours[k];
+            for (v, &target) in rgb.iter_mut().zip(&colour) {
+                *v += (unit(target) - *v) * w;
+            }
+        }
+    }
+}
+
+/// The model as the viewer shows it: scales multiplied by `splat_scale`, and with the damage
+/// layer on, each Gaussian's colour tinted towards its classes' colours by label probability ×
+/// opacity (damage-only greys the rest). Borrows when nothing changes.
+pub fn display_splats<'a>(
+    splats: &'a Splats,
+    splat_scale: f32,
+    layer: &DamageLayer,
+) -> Cow<'a, Splats> {
+    let scale_changes =
+        splat_scale.is_finite() && splat_scale > 0.0 && (splat_scale - 1.0).abs() > 1e-6;
+    let damage = layer.enabled && splats.label_channels > 0;
+    if !scale_changes && !damage {
+        return Cow::Borrowed(splats);
+    }
+    let mut out = splats.clone();
+    if scale_changes {
+        let ln = splat_scale.ln();
+        for s in &mut out.log_scales {
+            *s += glam::Vec3::splat(ln);
+        }
+    }
+    if damage {
+        let k_coeffs = out.sh_coeffs();
+        let channels = out.label_channels;
+        let opacity = layer.opacity.clamp(0.0, 1.0);
+        for g in 0..out.len() {
+            let sh = &mut out.sh[g * k_coeffs * 3..(g + 1) * k_coeffs * 3];
+            // Colour from the DC term alone (view-independent), as 3DGS: c = SH_C0 · dc + 0.5.
+            let mut rgb = [
+                SH_C0 * sh[0] + 0.5,
+                SH_C0 * sh[1] + 0.5,
+                SH_C0 * sh[2] + 0.5,
+            ];
+            let mut keep = 1.0;
+            if layer.damage_only {
+                let grey = 0.25 * (rgb[0] + rgb[1] + rgb[2]) / 3.0;
+                rgb = [grey; 3];
+            }
+            let labels = &splats.raw_labels[g * channels..(g + 1) * channels];
+            for (k, &raw) in labels.iter().enumerate().take(3) {
+                if !layer.visible[k] {
+                    continue;
+                }
+                let w = sigmoid(raw) * opacity;
+                if !(w > 0.0) {
+                    continue;
+                }
+                for (v, &target) in rgb.iter_mut().zip(&layer.colours[k]) {
+                    *v += (unit(target) - *v) * w;
+                }
+                keep *= 1.0 - w;
+            }
+            for (dc, v) in sh.iter_mut().zip(rgb) {
+                *dc = (v - 0.5) / SH_C0;
+            }
+            // View-dependent colour fades where damage is painted (and entirely in damage-only).
+            let rest = if layer.damage_only { 0.0 } else { keep };
+            for v in &mut sh[3..] {
+                *v *= rest;
+            }
+        }
+    }
+    Cow::Owned(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn full_label_at_full_opacity_paints_the_class_colour() {
+        let layer = DamageLayer {
+            opacity: 1.0,
+            ..DamageLayer::default()
+        };
+        let mut color = vec![0.5; 6];
+        let labels = vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        composite(&mut color, &labels, 3, &layer);
+        assert_eq!(&color[..3], &[1.0, 0.0, 0.0]);
+        assert_eq!(&color[3..], &[0.5, 0.5, 0.5], "no label, no change");
+    }
+
+    #[test]
+    fn hidden_class_is_not_drawn() {
+        let mut layer = DamageLayer::default();
+        layer.visible[0] = false;
+        let mut color = vec![0.5; 3];
+        composite(&mut color, &[1.0, 0.0, 0.0], 3, &layer);
+        assert_eq!(color, vec![0.5; 3]);
+    }
+}

@@ -1,0 +1,88 @@
+//! Training history for the live charts and the statistics panel: loss, PSNR and Gaussian count
+//! against wall time, bounded in memory by thinning old samples. Data only; the charts panel and
+//! the headless demo's plotters chart both read it.
+
+use serde::Serialize;
+
+/// One progress report of a training run.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Sample {
+    /// Seconds since the run started.
+    pub wall_s: f64,
+    pub step: u32,
+    pub loss: f64,
+    /// Training-batch PSNR, dB (NaN when not reported).
+    pub psnr: f64,
+    pub gaussians: usize,
+}
+
+/// A held-out evaluation during or after training.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct EvalSample {
+    pub wall_s: f64,
+    pub step: u32,
+    pub psnr: f64,
+}
+
+/// Bounded history: when full, every other sample of the older half is dropped, so the curve
+/// keeps its shape over long runs.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct History {
+    pub samples: Vec<Sample>,
+    pub evals: Vec<EvalSample>,
+}
+
+impl History {
+    pub const CAPACITY: usize = 4096;
+
+    pub fn clear(&mut self) {
+        self.samples.clear();
+        self.evals.clear();
+    }
+
+    pub fn push(&mut self, sample: Sample) {
+        if self.samples.len() >= Self::CAPACITY {
+            let half = self.samples.len() / 2;
+            let mut i = 0;
+            self.samples.retain(|_| {
+                i += 1;
+                // Keep every other sample of the older half, all of the newer half.
+                i > half || i % 2 == 1
+            });
+        }
+        self.samples.push(sample);
+    }
+
+    pub fn push_eval(&mut self, eval: EvalSample) {
+        self.evals.push(eval);
+    }
+
+    pub fn last(&self) -> Option<&Sample> {
+        self.samples.last()
+    }
+
+    /// Iterations per second over the last few seconds of samples.
+    pub fn iterations_per_second(&self) -> Option<f64> {
+        let last = self.samples.last()?;
+        let window_start = last.wall_s - 3.0;
+        let first = self
+            .samples
+            .iter()
+            .find(|s| s.wall_s >= window_start)
+            .filter(|s| s.step < last.step)?;
+        let dt = last.wall_s - first.wall_s;
+        if !(dt > 0.0) {
+            return None;
+        }
+        Some(f64::from(last.step - first.step) / dt)
+    }
+
+    /// `(wall_s, value)` series for plotting, skipping non-finite values.
+    pub fn series(&self, value: impl Fn(&Sample) -> f64) -> Vec<[f64; 2]> {
+        self.samples
+            .iter()
+            .map(|s| [s.wall_s, value(s)])
+            .filter(|p| p[1].is_finite())
+            .collect()
+    }
+}

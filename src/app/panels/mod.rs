@@ -1,0 +1,34 @@
+//! The side panels: each a small type with one `ui(&mut self, ui, &AppState, &mut Vec<Command>)`
+//! method that reads the state and queues commands (rerun style). Panels never change the state
+//! directly and never talk to each other.
+
+pub mod charts;
+pub mod log;
+pub mod project;
+pub mod stats;
+pub mod training;
+pub mod view;
+
+pub use charts::ChartsPanel;
+pub use log::LogPanel;
+pub use project::ProjectPanel;
+pub use stats::StatsPanel;
+pub use training::TrainingPanel;
+pub use view::ViewPanel;
+
+use crate::app::commands::Command;
+use crate::app::settings::Settings;
+use crate::app::state::AppState;
+
+/// Edits a copy of the settings with `edit`; queues an update when anything changed.
+pub(crate) fn edit_settings(
+    state: &AppState,
+    commands: &mut Vec<Command>,
+    edit: impl FnOnce(&mut Settings),
+) {
+    let mut settings = state.settings.clone();
+    edit(&mut settings);
+    if settings != state.settings {
+        commands.push(Command::UpdateSettings(Box::new(settings)));
+    }
+}

@@ -1,0 +1,161 @@
+//! Training controls: start / pause / resume / stop, iterations, resolution scale, mode and label
+//! weight, and a progress bar with ETA. Reads the state, queues commands.
+
+use crate::app::commands::Command;
+use crate::app::panels::edit_settings;
+use crate::app::settings::TrainMode;
+use crate::app::state::AppState;
+use crate::app::training::RunStatus;
+
+#[derive(Default)]
+pub struct TrainingPanel;
+
+/// `1:05` or `1:02:05`.
+pub fn format_duration(seconds: f64) -> String {
+    if !seconds.is_finite() || seconds < 0.0 {
+        return "–".into();
+    }
+    let s = seconds.round() as u64;
+    if s >= 3600 {
+        format!("{}:{:02}:{:02}", s / 3600, (s / 60) % 60, s % 60)
+    } else {
+        format!("{}:{:02}", s / 60, s % 60)
+    }
+}
+
+impl TrainingPanel {
+    pub fn ui(&mut self, ui: &mut egui::Ui, state: &AppState, commands: &mut Vec<Command>) {
+        let session = state.training.as_ref();
+        let running = session.is_some_and(|s| s.is_running());
+        let can_train = state.scene.as_ref().is_some_and(|s| s.dataset.is_some());
+
+        ui.add_enabled_ui(!running, |ui| {
+            edit_settings(state, commands, |s| {
+                let t = &mut s.training;
+                egui::Grid::new("training-settings")
+                    .num_columns(2)
+                    .show(ui, |ui| {
+                        ui.label("Iterations");
+                        ui.add(
+                            egui::DragValue::new(&mut t.iterations)
+                                .range(1..=1_000_000)
+                                .speed(50),
+                        );
+                        ui.end_row();
+                        ui.label("Resolution");
+                        egui::ComboBox::from_id_salt("training-resolution")
+                            .selected_text(format!("1/{}", t.resolution_factor))
+                            .show_ui(ui, |ui| {
+                                for f in [1, 2, 4, 8] {
+                                    ui.selectable_value(
+                                        &mut t.resolution_factor,
+                                        f,
+                                        format!("1/{f}"),
+                                    );
+                                }
+                            });
+                        ui.end_row();
+                        ui.label("Mode");
+                        ui.horizontal(|ui| {
+                            for mode in TrainMode::ALL {
+                                ui.selectable_value(&mut t.mode, mode, mode.name());
+                            }
+                        });
+                        ui.end_row();
+                        if t.mode == TrainMode::Label {
+                            ui.label("Label weight");
+                            ui.add(egui::Slider::new(&mut t.label_weight, 0.0..=2.0));
+                            ui.end_row();
+                        }
+                    });
+            });
+        });
+
+        ui.horizontal(|ui| {
+            match session.map(|s| &s.status) {
+                Some(RunStatus::Running) | Some(RunStatus::Preparing) => {
+                    if ui.button("Pause").clicked() {
+                        commands.push(Command::PauseTraining);
+                    }
+                }
+                Some(RunStatus::Paused) => {
+                    if ui.button("Resume").clicked() {
+                        commands.push(Command::ResumeTraining);
+                    }
+                }
+                _ => {
+                    if ui
+                        .add_enabled(can_train, egui::Button::new("Train"))
+                        .clicked()
+                    {
+                        commands.push(Command::StartTraining);
+                    }
+                }
+            }
+            if ui.add_enabled(running, egui::Button::new("Stop")).clicked() {
+                commands.push(Command::StopTraining);
+            }
+        });
+
+        let Some(session) = session else {
+            if !can_train {
+                ui.weak("Open a dataset to train.");
+            }
+            return;
+        };
+        let (text, eta) = match (&session.status, &session.progress) {
+            (RunStatus::Preparing, _) => ("loading views…".to_string(), None),
+            (RunStatus::Failed(e), _) => (format!("failed: {e}"), None),
+            (
+                RunStatus::Finished {
+                    cancelled, seconds, ..
+                },
+                _,
+            ) => (
+                format!(
+                    "{} in {}",
+                    if *cancelled { "stopped" } else { "done" },
+                    format_duration(*seconds)
+                ),
+                None,
+            ),
+            (status, Some(p)) => (
+                format!(
+                    "{}{} / {}",
+                    if *status == RunStatus::Paused {
+                        "paused · "
+                    } else {
+                        ""
+                    },
+                    p.step,
+                    p.total
+                ),
+                Some(p.eta.as_secs_f64()),
+            ),
+            (_, None) => ("starting…".to_string(), None),
+        };
+        let text = match eta {
+            Some(eta) => format!("{text} · ETA {}", format_duration(eta)),
+            None => text,
+        };
+        ui.add(
+            egui::ProgressBar::new(session.fraction())
+                .text(text)
+                .animate(
+                    session.status == RunStatus::Running || session.status == RunStatus::Preparing,
+                ),
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::format_duration;
+
+    #[test]
+    fn durations_read_as_clock_times() {
+        assert_eq!(format_duration(65.0), "1:05");
+        assert_eq!(format_duration(3725.0), "1:02:05");
+        assert_eq!(format_duration(f64::NAN), "–");
+    }
+}

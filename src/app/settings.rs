@@ -1,0 +1,224 @@
+//! The viewer's persisted settings (eframe storage, RON): view, navigation, training defaults and
+//! the damage layer. Plain data with serde defaults, so an older or partial file still loads;
+//! no UI and no I/O beyond the storage hand-off.
+
+use serde::{Deserialize, Serialize};
+
+use crate::app::camera_controller::NavMode;
+use crate::damage::DamageClass;
+
+/// Key under which the settings live in eframe's storage.
+pub const STORAGE_KEY: &str = "damage-twin.settings";
+
+/// What the trainer optimises (issue 7: the viewer picks the mode).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum TrainMode {
+    /// Photos only.
+    Rgb,
+    /// Photos with the damage masks painted on in the class colours (the published method).
+    Overlay,
+    /// Photos as RGB target plus one label channel per damage class (ours).
+    #[default]
+    Label,
+}
+
+impl TrainMode {
+    pub const ALL: [TrainMode; 3] = [TrainMode::Rgb, TrainMode::Overlay, TrainMode::Label];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            TrainMode::Rgb => "rgb",
+            TrainMode::Overlay => "overlay",
+            TrainMode::Label => "label",
+        }
+    }
+}
+
+/// How the photo of a snapped survey view is compared with the render.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum CompareMode {
+    /// A vertical split: photo left of the handle, render right.
+    #[default]
+    Swipe,
+    /// The photo drawn over the render with an opacity.
+    Blend,
+    /// Photo and render side by side.
+    SideBySide,
+}
+
+/// Damage layer display (issue 7 item 3): class colours over the render.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct DamageLayer {
+    pub enabled: bool,
+    /// Opacity of the class colours over the photo-real render.
+    pub opacity: f32,
+    /// Show only damage (no photo-real colour).
+    pub damage_only: bool,
+    /// Per class, in `DamageClass::ALL` order: shown or not.
+    pub visible: [bool; 3],
+    /// Per class colour (sRGB), in `DamageClass::ALL` order.
+    pub colours: [[u8; 3]; 3],
+}
+
+impl Default for DamageLayer {
+    fn default() -> Self {
+        DamageLayer {
+            enabled: true,
+            opacity: 0.7,
+            damage_only: false,
+            visible: [true; 3],
+            colours: DamageClass::ALL.map(|c| c.default_colour()),
+        }
+    }
+}
+
+/// Training defaults the training panel starts a job with.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TrainingSettings {
+    pub iterations: u32,
+    /// Image downscale factor (1, 2, 4 or 8).
+    pub resolution_factor: u32,
+    pub mode: TrainMode,
+    /// Weight of the label BCE loss in label mode.
+    pub label_weight: f32,
+}
+
+impl Default for TrainingSettings {
+    fn default() -> Self {
+        TrainingSettings {
+            iterations: 3000,
+            // Half of 960×540: fast enough on a CPU trainer to see the twin form within a minute.
+            resolution_factor: 2,
+            mode: TrainMode::Label,
+            label_weight: 0.1,
+        }
+    }
+}
+
+/// Everything the viewer remembers between runs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Settings {
+    /// Background colour of the render (linear RGB in [0, 1]).
+    pub background: [f32; 3],
+    /// Multiplier on every Gaussian's scale when viewing (1 = as trained).
+    pub splat_scale: f32,
+    /// Vertical field of view of the free camera, degrees.
+    pub fov_deg: f32,
+    pub nav_mode: NavMode,
+    /// Fly speed multiplier on the scene-derived speed.
+    pub fly_speed: f32,
+    pub show_grid: bool,
+    pub show_frusta: bool,
+    /// Orbit slowly around the target (presentations; also how frame times are measured).
+    pub turntable: bool,
+    /// Lower the render resolution while the camera moves.
+    pub adaptive_resolution: bool,
+    /// Frame time the adaptive resolution aims for, milliseconds.
+    pub target_frame_ms: f32,
+    /// Smallest render scale the adaptive resolution may pick.
+    pub min_render_scale: f32,
+    pub compare_mode: CompareMode,
+    /// Photo opacity in blend mode.
+    pub compare_blend: f32,
+    pub training: TrainingSettings,
+    pub damage: DamageLayer,
+    /// Show the charts panel.
+    pub show_charts: bool,
+    /// Most recently opened datasets / projects, newest first.
+    pub recent: Vec<std::path::PathBuf>,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            background: [0.0, 0.0, 0.0],
+            splat_scale: 1.0,
+            fov_deg: 50.0,
+            nav_mode: NavMode::Orbit,
+            fly_speed: 1.0,
+            show_grid: true,
+            show_frusta: true,
+            turntable: false,
+            adaptive_resolution: true,
+            target_frame_ms: 40.0,
+            min_render_scale: 0.25,
+            compare_mode: CompareMode::Swipe,
+            compare_blend: 0.5,
+            training: TrainingSettings::default(),
+            damage: DamageLayer::default(),
+            show_charts: true,
+            recent: Vec::new(),
+        }
+    }
+}
+
+impl Settings {
+    const MAX_RECENT: usize = 8;
+
+    /// Clamps every value into its valid range (a hand-edited or corrupt file must not crash).
+    pub fn sanitised(mut self) -> Settings {
+        let d = Settings::default();
+        for c in &mut self.background {
+            *c = if c.is_finite() {
+                c.clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+        }
+        let clamp = |v: f32, lo: f32, hi: f32, default: f32| {
+            if v.is_finite() {
+                v.clamp(lo, hi)
+            } else {
+                default
+            }
+        };
+        self.splat_scale = clamp(self.splat_scale, 0.01, 4.0, d.splat_scale);
+        self.fov_deg = clamp(self.fov_deg, 10.0, 120.0, d.fov_deg);
+        self.fly_speed = clamp(self.fly_speed, 0.01, 100.0, d.fly_speed);
+        self.target_frame_ms = clamp(self.target_frame_ms, 5.0, 500.0, d.target_frame_ms);
+        self.min_render_scale = clamp(self.min_render_scale, 0.1, 1.0, d.min_render_scale);
+        self.compare_blend = clamp(self.compare_blend, 0.0, 1.0, d.compare_blend);
+        self.damage.opacity = clamp(self.damage.opacity, 0.0, 1.0, d.damage.opacity);
+        self.training.iterations = self.training.iterations.clamp(1, 1_000_000);
+        if ![1, 2, 4, 8].contains(&self.training.resolution_factor) {
+            self.training.resolution_factor = 1;
+        }
+        self.training.label_weight = clamp(self.training.label_weight, 0.0, 10.0, 0.1);
+        self.recent.truncate(Self::MAX_RECENT);
+        self
+    }
+
+    /// Puts `path` first in the recent list.
+    pub fn remember(&mut self, path: &std::path::Path) {
+        self.recent.retain(|p| p != path);
+        self.recent.insert(0, path.to_path_buf());
+        self.recent.truncate(Self::MAX_RECENT);
+    }
+
+    /// Serialised form (what eframe's storage keeps).
+    pub fn to_ron(&self) -> Result<String, ron::Error> {
+        ron::to_string(self)
+    }
+
+    /// Parses a stored form; unknown or missing fields fall back to defaults.
+    pub fn from_ron(text: &str) -> Result<Settings, ron::error::SpannedError> {
+        ron::from_str::<Settings>(text).map(Settings::sanitised)
+    }
+
+    /// Loads from eframe storage, defaults when absent or unreadable.
+    pub fn load(storage: Option<&dyn eframe::Storage>) -> Settings {
+        storage
+            .and_then(|s| s.get_string(STORAGE_KEY))
+            .and_then(|text| Settings::from_ron(&text).ok())
+            .unwrap_or_default()
+    }
+
+    pub fn save(&self, storage: &mut dyn eframe::Storage) {
+        if let Ok(text) = self.to_ron() {
+            storage.set_string(STORAGE_KEY, text);
+        }
+    }
+}

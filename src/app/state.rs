@@ -1,0 +1,408 @@
+//! The viewer's state and the one place it changes: `AppState::apply(Command)`. Panels and the
+//! viewport only read it and queue commands; worker threads (dialogs, loading, training) report
+//! back through channels drained with `try_recv` in `poll`, so nothing here ever blocks the UI.
+
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crossbeam_channel::{Receiver, Sender};
+
+use crate::app::camera_controller::CameraController;
+use crate::app::commands::{Command, DialogKind};
+use crate::app::history::History;
+use crate::app::scene_frame::SceneFrame;
+use crate::app::settings::Settings;
+use crate::app::training::TrainingSession;
+use crate::app::viewport::FrameStats;
+use crate::app::{files, workers};
+use crate::scene::{Camera, Dataset, RgbImage};
+use crate::splats::Splats;
+
+/// Most log lines kept for the log panel.
+const LOG_LINES: usize = 200;
+
+/// What is open.
+#[derive(Clone, Debug)]
+pub struct OpenScene {
+    /// The folder or file the user opened.
+    pub source: PathBuf,
+    /// The dataset the twin is trained from (absent for a bare PLY).
+    pub dataset: Option<Arc<Dataset>>,
+    /// Project folder (with `twin.ron`) the twin was loaded from or last saved to.
+    pub project_dir: Option<PathBuf>,
+    pub frame: SceneFrame,
+}
+
+/// The photo of a snapped view.
+#[derive(Clone, Debug)]
+pub enum Photo {
+    Loading,
+    Loaded(Arc<RgbImage>),
+    Failed(String),
+}
+
+/// Looking through one survey camera, comparing render and photo.
+#[derive(Clone, Debug)]
+pub struct Snap {
+    pub view: usize,
+    pub camera: Camera,
+    pub photo: Photo,
+}
+
+/// Results of worker threads (everything the UI must not wait for).
+pub enum WorkerResult {
+    Command(Command),
+    Opened {
+        source: PathBuf,
+        dataset: Option<Arc<Dataset>>,
+        splats: Option<Arc<Splats>>,
+        project_dir: Option<PathBuf>,
+    },
+    Photo {
+        view: usize,
+        result: Result<Arc<RgbImage>, String>,
+    },
+}
+
+/// Everything the viewer shows.
+pub struct AppState {
+    pub settings: Settings,
+    pub camera: CameraController,
+    pub scene: Option<OpenScene>,
+    /// The model on screen (latest training snapshot, or loaded).
+    pub splats: Option<Arc<Splats>>,
+    /// Bumped whenever `splats` changes (the renderer re-uploads on change).
+    pub splats_generation: u64,
+    pub training: Option<TrainingSession>,
+    pub history: History,
+    pub snap: Option<Snap>,
+    pub log: VecDeque<String>,
+    /// Viewport size in pixels, as last laid out (for PNG export at screen size).
+    pub viewport_pixels: [u32; 2],
+    /// The viewport's frame time and render resolution, for the statistics panel.
+    pub frame_stats: FrameStats,
+    /// Whether dialogs may open (false in tests and headless use).
+    pub interactive: bool,
+    /// Start training as soon as the next dataset has opened (the demo).
+    pub train_on_open: bool,
+    results_tx: Sender<WorkerResult>,
+    results_rx: Receiver<WorkerResult>,
+}
+
+impl AppState {
+    pub fn new(settings: Settings) -> AppState {
+        let (results_tx, results_rx) = crossbeam_channel::unbounded();
+        let frame = SceneFrame::from_cameras(&[], &[]);
+        AppState {
+            settings,
+            camera: frame.controller(),
+            scene: None,
+            splats: None,
+            splats_generation: 0,
+            training: None,
+            history: History::default(),
+            snap: None,
+            log: VecDeque::new(),
+            viewport_pixels: [960, 540],
+            frame_stats: FrameStats::default(),
+            interactive: false,
+            train_on_open: false,
+            results_tx,
+            results_rx,
+        }
+    }
+
+    /// A sender worker threads report through.
+    pub fn results_sender(&self) -> Sender<WorkerResult> {
+        self.results_tx.clone()
+    }
+
+    pub fn log_line(&mut self, line: impl Into<String>) {
+        let line = line.into();
+        tracing::info!("{line}");
+        if self.log.len() >= LOG_LINES {
+            self.log.pop_front();
+        }
+        self.log.push_back(line);
+    }
+
+    /// Replaces the model on screen.
+    pub fn set_splats(&mut self, splats: Arc<Splats>) {
+        self.splats = Some(splats);
+        self.splats_generation += 1;
+    }
+
+    /// Survey cameras of the open dataset.
+    pub fn survey_cameras(&self) -> Vec<Camera> {
+        self.scene
+            .as_ref()
+            .and_then(|s| s.dataset.as_ref())
+            .map(|d| d.views.iter().map(|v| v.camera).collect())
+            .unwrap_or_default()
+    }
+
+    /// The camera the viewport renders with at `width × height` pixels: the snapped survey
+    /// camera (scaled to fit, aspect kept by the viewport) or the free camera.
+    pub fn view_camera(&self, width: u32, height: u32) -> Camera {
+        match &self.snap {
+            Some(snap) => snap.camera.resized(width, height),
+            None => self.camera.camera(width, height),
+        }
+    }
+
+    /// Drains worker results and training events without blocking. Returns true when anything
+    /// changed (the UI repaints).
+    pub fn poll(&mut self) -> bool {
+        let mut changed = false;
+        while let Ok(result) = self.results_rx.try_recv() {
+            changed = true;
+            self.on_worker_result(result);
+        }
+        if let Some(session) = &mut self.training {
+            let update = session.poll(&mut self.history);
+            if update.changed {
+                changed = true;
+            }
+            for line in update.log {
+                self.log_line(line);
+            }
+            if let Some(splats) = update.snapshot {
+                self.set_splats(splats);
+            }
+        }
+        changed
+    }
+
+    fn on_worker_result(&mut self, result: WorkerResult) {
+        match result {
+            WorkerResult::Command(command) => self.apply(command),
+            WorkerResult::Opened {
+                source,
+                dataset,
+                splats,
+                project_dir,
+            } => {
+                self.on_opened(source, dataset, splats, project_dir);
+            }
+            WorkerResult::Photo { view, result } => {
+                if let Some(snap) = &mut self.snap
+                    && snap.view == view
+                {
+                    snap.photo = match result {
+                        Ok(image) => Photo::Loaded(image),
+                        Err(e) => Photo::Failed(e),
+                    };
+                }
+            }
+        }
+    }
+
+    fn on_opened(
+        &mut self,
+        source: PathBuf,
+        dataset: Option<Arc<Dataset>>,
+        splats: Option<Arc<Splats>>,
+        project_dir: Option<PathBuf>,
+    ) {
+        self.stop_training();
+        self.snap = None;
+        self.history.clear();
+        let cameras: Vec<Camera> = dataset
+            .as_ref()
+            .map(|d| d.views.iter().map(|v| v.camera).collect())
+            .unwrap_or_default();
+        let points: Vec<glam::Vec3> =
+            match (&splats, dataset.as_ref().and_then(|d| d.points.as_ref())) {
+                (Some(s), _) => s.means.clone(),
+                (None, Some(p)) => p.positions.clone(),
+                (None, None) => Vec::new(),
+            };
+        let frame = SceneFrame::from_cameras(&cameras, &points);
+        self.camera = frame.controller();
+        self.camera.fly_speed *= self.settings.fly_speed;
+        self.camera.mode = self.settings.nav_mode;
+        self.camera.fov_y = self.settings.fov_deg.to_radians();
+        self.settings.remember(&source);
+        if let Some(d) = &dataset {
+            self.log_line(format!(
+                "opened {} ({} views, {:?})",
+                source.display(),
+                d.views.len(),
+                d.format
+            ));
+            for w in d.warnings.iter().take(5) {
+                self.log_line(format!("warning: {w}"));
+            }
+        } else {
+            self.log_line(format!("opened {}", source.display()));
+        }
+        match splats {
+            Some(s) => self.set_splats(s),
+            None => {
+                self.splats = None;
+                self.splats_generation += 1;
+            }
+        }
+        self.scene = Some(OpenScene {
+            source,
+            dataset,
+            project_dir,
+            frame,
+        });
+        if std::mem::take(&mut self.train_on_open) {
+            self.apply(Command::StartTraining);
+        }
+    }
+
+    fn stop_training(&mut self) {
+        if let Some(session) = self.training.take() {
+            session.cancel();
+        }
+    }
+
+    /// Performs one command.
+    pub fn apply(&mut self, command: Command) {
+        match command {
+            Command::Open(path) => {
+                self.log_line(format!("opening {}", path.display()));
+                workers::open(path, self.results_sender());
+            }
+            Command::ShowDialog(kind) => {
+                if self.interactive {
+                    let start = self.scene.as_ref().map(|s| s.source.clone());
+                    workers::dialog(kind, start, self.results_sender());
+                } else {
+                    self.log_line("file dialogs are disabled here");
+                }
+            }
+            Command::SaveProject(dir) => self.save_project(&dir),
+            Command::SaveProjectHere => {
+                match self.scene.as_ref().and_then(|s| s.project_dir.clone()) {
+                    Some(dir) => self.save_project(&dir),
+                    None => self.apply(Command::ShowDialog(DialogKind::SaveProject)),
+                }
+            }
+            Command::ExportPly(path) => match &self.splats {
+                Some(splats) => {
+                    let result = files::export_ply(&path, splats);
+                    self.report(result, &format!("exported {}", path.display()));
+                }
+                None => self.log_line("nothing to export yet: no model"),
+            },
+            Command::ExportPng(path) => match &self.splats {
+                Some(splats) => {
+                    let [w, h] = self.viewport_pixels;
+                    let camera = self.view_camera(w, h);
+                    workers::export_png(
+                        path,
+                        splats.clone(),
+                        camera,
+                        self.settings.clone(),
+                        self.results_sender(),
+                    );
+                }
+                None => self.log_line("nothing to render yet: no model"),
+            },
+            Command::StartTraining => self.start_training(),
+            Command::PauseTraining => {
+                if let Some(t) = &mut self.training {
+                    t.pause();
+                }
+            }
+            Command::ResumeTraining => {
+                if let Some(t) = &mut self.training {
+                    t.resume();
+                }
+            }
+            Command::StopTraining => {
+                if let Some(t) = &mut self.training {
+                    t.stop();
+                }
+            }
+            Command::SnapToView(index) => self.snap_to(index),
+            Command::Unsnap => {
+                if let Some(snap) = self.snap.take() {
+                    self.camera.snap_to(&snap.camera);
+                }
+            }
+            Command::ResetView => {
+                self.snap = None;
+                if let Some(scene) = &self.scene {
+                    self.camera = scene.frame.controller();
+                }
+                self.camera.mode = self.settings.nav_mode;
+                self.camera.fov_y = self.settings.fov_deg.to_radians();
+            }
+            Command::UpdateSettings(settings) => {
+                let settings = settings.sanitised();
+                self.camera.mode = settings.nav_mode;
+                self.camera.fov_y = settings.fov_deg.to_radians();
+                if let Some(scene) = &self.scene {
+                    self.camera.fly_speed = scene.frame.camera_distance * 0.5 * settings.fly_speed;
+                }
+                self.settings = settings;
+            }
+            Command::Notify(line) => self.log_line(line),
+        }
+    }
+
+    fn report(&mut self, result: anyhow::Result<()>, success: &str) {
+        match result {
+            Ok(()) => self.log_line(success),
+            Err(e) => self.log_line(format!("error: {e:#}")),
+        }
+    }
+
+    fn save_project(&mut self, dir: &Path) {
+        let Some(splats) = self.splats.clone() else {
+            self.log_line("nothing to save yet: no model");
+            return;
+        };
+        let dataset_root = self
+            .scene
+            .as_ref()
+            .and_then(|s| s.dataset.as_ref())
+            .map(|d| d.root.clone());
+        let result = files::save_project(dir, dataset_root.as_deref(), &splats, &self.settings);
+        let ok = result.is_ok();
+        self.report(result, &format!("saved the twin to {}", dir.display()));
+        if ok && let Some(scene) = &mut self.scene {
+            scene.project_dir = Some(dir.to_path_buf());
+        }
+    }
+
+    fn snap_to(&mut self, index: usize) {
+        let Some(dataset) = self.scene.as_ref().and_then(|s| s.dataset.clone()) else {
+            return;
+        };
+        let Some(view) = dataset.views.get(index) else {
+            self.log_line(format!("no survey view {index}"));
+            return;
+        };
+        self.snap = Some(Snap {
+            view: index,
+            camera: view.camera,
+            photo: Photo::Loading,
+        });
+        workers::load_photo(dataset, index, self.results_sender());
+    }
+
+    fn start_training(&mut self) {
+        let Some(dataset) = self.scene.as_ref().and_then(|s| s.dataset.clone()) else {
+            self.log_line("open a dataset to train");
+            return;
+        };
+        if self.training.as_ref().is_some_and(|t| t.is_running()) {
+            self.log_line("training is already running");
+            return;
+        }
+        self.history.clear();
+        self.training = Some(TrainingSession::start(
+            dataset,
+            self.settings.training.clone(),
+            self.settings.background,
+        ));
+        self.log_line("training started");
+    }
+}

@@ -1,0 +1,476 @@
+//! The 3D viewport: turns mouse and keys into camera input (orbit / pan / zoom, fly with
+//! WASD/QE), picks the render resolution, draws the splats through the GPU paint callback, then
+//! the grid, the survey frusta (click one to snap to it) and the photo comparison on top.
+//! The camera is view state and changes here directly; everything else goes through commands.
+
+use std::sync::Arc;
+
+use glam::{Vec2, Vec3};
+
+use crate::app::camera_controller::CameraInput;
+use crate::app::commands::Command;
+use crate::app::overlay::{self, SegmentKind};
+use crate::app::resolution::{AdaptiveResolution, scaled_size};
+use crate::app::settings::CompareMode;
+use crate::app::splat_view::SplatView;
+use crate::app::state::{AppState, Photo};
+use crate::scene::{Camera, RgbImage};
+
+/// Frame statistics the statistics panel shows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameStats {
+    pub frame_ms: f32,
+    pub render_scale: f32,
+    pub render_size: [u32; 2],
+}
+
+impl Default for FrameStats {
+    fn default() -> Self {
+        FrameStats {
+            frame_ms: 0.0,
+            render_scale: 1.0,
+            render_size: [0, 0],
+        }
+    }
+}
+
+/// The viewport's own state between frames.
+#[derive(Default)]
+pub struct Viewport {
+    resolution: AdaptiveResolution,
+    splat_view: SplatView,
+    photo: Option<(usize, Arc<RgbImage>, egui::TextureHandle)>,
+    /// Swipe handle position in [0, 1] of the image width.
+    swipe: f32,
+    /// Where the viewport was laid out last frame, in points.
+    rect: Option<egui::Rect>,
+    frame_log: FrameLog,
+}
+
+/// With `DAMAGE_TWIN_FRAME_STATS=1`, prints frame-time statistics every 5 s to stderr (how the
+/// frame times in the docs were measured).
+struct FrameLog {
+    enabled: bool,
+    frames_ms: Vec<f32>,
+    scales: Vec<f32>,
+    since: std::time::Instant,
+}
+
+impl Default for FrameLog {
+    fn default() -> Self {
+        FrameLog {
+            enabled: std::env::var_os("DAMAGE_TWIN_FRAME_STATS").is_some_and(|v| v != "0"),
+            frames_ms: Vec::new(),
+            scales: Vec::new(),
+            since: std::time::Instant::now(),
+        }
+    }
+}
+
+impl FrameLog {
+    fn record(&mut self, frame_ms: f32, scale: f32) {
+        if !self.enabled || !(frame_ms > 0.0) {
+            return;
+        }
+        self.frames_ms.push(frame_ms);
+        self.scales.push(scale);
+        if self.since.elapsed().as_secs_f32() < 5.0 {
+            return;
+        }
+        let mut sorted = self.frames_ms.clone();
+        sorted.sort_by(f32::total_cmp);
+        let n = sorted.len();
+        let mean = sorted.iter().sum::<f32>() / n as f32;
+        let mean_scale = self.scales.iter().sum::<f32>() / n as f32;
+        eprintln!(
+            "frames: {n} in {:.1} s, mean {mean:.1} ms, median {:.1} ms, p95 {:.1} ms, max {:.1} ms, mean render scale {mean_scale:.2}",
+            self.since.elapsed().as_secs_f32(),
+            sorted[n / 2],
+            sorted[(n * 95 / 100).min(n - 1)],
+            sorted[n - 1],
+        );
+        self.frames_ms.clear();
+        self.scales.clear();
+        self.since = std::time::Instant::now();
+    }
+}
+
+/// Reads navigation input for this frame (keys only when no text field has focus).
+fn camera_input(ui: &egui::Ui, response: &egui::Response, viewport_height: f32) -> CameraInput {
+    let mut input = CameraInput {
+        viewport_height,
+        ..CameraInput::default()
+    };
+    let keys_free = !ui.ctx().egui_wants_keyboard_input();
+    ui.input(|i| {
+        input.dt = i.stable_dt.min(0.1);
+        if response.hovered() {
+            input.zoom = i.smooth_scroll_delta.y;
+        }
+        if keys_free {
+            let axis = |pos: egui::Key, neg: egui::Key| {
+                f32::from(u8::from(i.key_down(pos))) - f32::from(u8::from(i.key_down(neg)))
+            };
+            input.fly = Vec3::new(
+                axis(egui::Key::D, egui::Key::A),
+                axis(egui::Key::E, egui::Key::Q),
+                axis(egui::Key::W, egui::Key::S),
+            );
+            input.boost = i.modifiers.shift;
+        }
+    });
+    let delta = response.drag_delta();
+    let delta = Vec2::new(delta.x, delta.y);
+    let pan_drag = response.dragged_by(egui::PointerButton::Secondary)
+        || response.dragged_by(egui::PointerButton::Middle)
+        || (response.dragged_by(egui::PointerButton::Primary) && ui.input(|i| i.modifiers.shift));
+    if pan_drag {
+        input.pan = delta;
+    } else if response.dragged_by(egui::PointerButton::Primary) {
+        input.rotate = delta;
+    }
+    input
+}
+
+/// The largest rectangle of aspect `w / h` centred in `rect`.
+fn fit_aspect(rect: egui::Rect, w: f32, h: f32) -> egui::Rect {
+    if !(w > 0.0 && h > 0.0) {
+        return rect;
+    }
+    let scale = (rect.width() / w).min(rect.height() / h);
+    egui::Rect::from_center_size(rect.center(), egui::vec2(w * scale, h * scale))
+}
+
+fn photo_texture(ctx: &egui::Context, image: &RgbImage) -> egui::TextureHandle {
+    let pixels: Vec<egui::Color32> = image
+        .data
+        .chunks_exact(3)
+        .map(|c| {
+            let b = |v: f32| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+            egui::Color32::from_rgb(b(c[0]), b(c[1]), b(c[2]))
+        })
+        .collect();
+    let color_image = egui::ColorImage::new([image.width as usize, image.height as usize], pixels);
+    ctx.load_texture("survey-photo", color_image, egui::TextureOptions::LINEAR)
+}
+
+impl Viewport {
+    /// Creates the GPU splat renderer on eframe's device (once; errors show in the viewport).
+    pub fn install_renderer(&mut self, render_state: Option<&eframe::egui_wgpu::RenderState>) {
+        self.splat_view.install(render_state);
+    }
+
+    /// Where the viewport was last laid out, in points (empty before the first frame).
+    pub fn last_rect(&self) -> egui::Rect {
+        self.rect.unwrap_or(egui::Rect::NOTHING)
+    }
+
+    /// The GPU renderer's last error, or why there is none.
+    pub fn renderer_error(&self) -> Option<String> {
+        self.splat_view.error()
+    }
+
+    pub fn ui(&mut self, ui: &mut egui::Ui, state: &mut AppState, commands: &mut Vec<Command>) {
+        let full = ui.available_rect_before_wrap();
+        let response = ui.allocate_rect(full, egui::Sense::click_and_drag());
+        self.rect = Some(full);
+        let ppp = ui.ctx().pixels_per_point();
+        let painter = ui.painter_at(full);
+        let bg = state.settings.background;
+        let bg32 = egui::Color32::from_rgb(
+            (bg[0] * 255.0) as u8,
+            (bg[1] * 255.0) as u8,
+            (bg[2] * 255.0) as u8,
+        );
+        painter.rect_filled(full, 0.0, bg32);
+
+        let mut input = camera_input(ui, &response, full.height());
+        if state.settings.turntable && state.snap.is_none() && input.rotate == Vec2::ZERO {
+            // 0.35 rad/s about the up axis, expressed as the drag that would do it.
+            input.rotate.x = -0.35 * input.dt / state.camera.rotate_speed;
+        }
+        if state.snap.is_some() && input.is_active() {
+            // Navigating leaves the survey camera, continuing from its pose.
+            if let Some(snap) = &state.snap {
+                state.camera.snap_to(&snap.camera);
+            }
+            state.snap = None;
+        }
+        if state.snap.is_none() {
+            state.camera.update(&input);
+        } else {
+            input = CameraInput::default();
+        }
+
+        // Where the render goes: the whole viewport, or the snapped camera's aspect (and only
+        // the right half side by side).
+        let snap_aspect = state.snap.as_ref().map(|s| {
+            let k = s.camera.intrinsics;
+            (k.width as f32, k.height as f32)
+        });
+        let compare = state.settings.compare_mode;
+        let (render_rect, photo_rect) = match snap_aspect {
+            Some((w, h)) if compare == CompareMode::SideBySide => {
+                let (left, right) = full.split_left_right_at_fraction(0.5);
+                (fit_aspect(right, w, h), Some(fit_aspect(left, w, h)))
+            }
+            Some((w, h)) => {
+                let r = fit_aspect(full, w, h);
+                (r, Some(r))
+            }
+            None => (full, None),
+        };
+
+        let frame_ms = ui.input(|i| i.unstable_dt) * 1000.0;
+        let moving = input.is_active() || state.camera.is_moving();
+        let scale = if state.settings.adaptive_resolution {
+            self.resolution.update(
+                moving,
+                frame_ms,
+                state.settings.target_frame_ms,
+                state.settings.min_render_scale,
+            )
+        } else {
+            1.0
+        };
+        let px_w = (render_rect.width() * ppp).round().max(1.0) as u32;
+        let px_h = (render_rect.height() * ppp).round().max(1.0) as u32;
+        state.viewport_pixels = [px_w, px_h];
+        let (rw, rh) = scaled_size(px_w, px_h, scale);
+        let camera = state.view_camera(rw, rh);
+        self.frame_log.record(frame_ms, scale);
+        state.frame_stats = FrameStats {
+            frame_ms: self.resolution.frame_ms(),
+            render_scale: scale,
+            render_size: [rw, rh],
+        };
+
+        if let Some(splats) = &state.splats {
+            self.splat_view.paint(
+                ui,
+                render_rect,
+                &camera,
+                splats,
+                state.splats_generation,
+                &state.settings,
+            );
+        } else {
+            painter.text(
+                full.center(),
+                egui::Align2::CENTER_CENTER,
+                if state.scene.is_some() {
+                    "waiting for the first model…"
+                } else {
+                    "Open a dataset or drop a folder here"
+                },
+                egui::FontId::proportional(16.0),
+                egui::Color32::GRAY,
+            );
+        }
+        if let Some(e) = self.splat_view.error() {
+            painter.text(
+                full.left_bottom() + egui::vec2(8.0, -8.0),
+                egui::Align2::LEFT_BOTTOM,
+                e,
+                egui::FontId::proportional(12.0),
+                ui.visuals().error_fg_color,
+            );
+        }
+
+        // Overlays are drawn with the camera at the render rectangle's point size.
+        let overlay_camera = state.view_camera(
+            render_rect.width().max(1.0) as u32,
+            render_rect.height().max(1.0) as u32,
+        );
+        self.draw_overlays(&painter, render_rect, &overlay_camera, state);
+
+        if response.clicked()
+            && let Some(pos) = response.interact_pointer_pos()
+            && state.settings.show_frusta
+            && let Some(scene) = &state.scene
+        {
+            let cameras = state.survey_cameras();
+            let click = Vec2::new(pos.x - render_rect.min.x, pos.y - render_rect.min.y);
+            let depth = scene.frame.camera_distance * 0.08;
+            if let Some(i) = overlay::pick_frustum(
+                &overlay_camera,
+                &cameras,
+                depth,
+                overlay::near_plane(&scene.frame),
+                click,
+                10.0,
+            ) && state.snap.as_ref().is_none_or(|s| s.view != i)
+            {
+                commands.push(Command::SnapToView(i));
+            }
+        }
+
+        if let Some(photo_rect) = photo_rect {
+            self.draw_photo(ui, &painter, render_rect, photo_rect, state, commands);
+        }
+
+        // Training snapshots repaint through the app's polling; only motion repaints at once.
+        if moving || self.resolution.scale() < 1.0 {
+            ui.ctx().request_repaint();
+        }
+    }
+
+    fn draw_overlays(
+        &self,
+        painter: &egui::Painter,
+        rect: egui::Rect,
+        camera: &Camera,
+        state: &AppState,
+    ) {
+        let Some(scene) = &state.scene else {
+            return;
+        };
+        let mut segments = Vec::new();
+        if state.settings.show_grid {
+            segments.extend(overlay::grid(&scene.frame, 10));
+        }
+        if state.settings.show_frusta {
+            let selected = state.snap.as_ref().map(|s| s.view);
+            let cameras = state.survey_cameras();
+            segments.extend(overlay::frusta(
+                &cameras,
+                scene.frame.camera_distance * 0.08,
+                selected,
+            ));
+        }
+        let near = overlay::near_plane(&scene.frame);
+        for seg in &segments {
+            let Some((a, b)) = overlay::project_segment(camera, seg, near) else {
+                continue;
+            };
+            let stroke = match seg.kind {
+                SegmentKind::Grid => egui::Stroke::new(1.0, egui::Color32::from_gray(70)),
+                SegmentKind::GridAxis => egui::Stroke::new(1.5, egui::Color32::from_gray(110)),
+                SegmentKind::Frustum => {
+                    egui::Stroke::new(1.0, egui::Color32::from_rgb(80, 170, 255))
+                }
+                SegmentKind::FrustumSelected => {
+                    egui::Stroke::new(2.0, egui::Color32::from_rgb(255, 200, 40))
+                }
+            };
+            painter.line_segment(
+                [
+                    rect.min + egui::vec2(a.x, a.y),
+                    rect.min + egui::vec2(b.x, b.y),
+                ],
+                stroke,
+            );
+        }
+    }
+
+    fn draw_photo(
+        &mut self,
+        ui: &mut egui::Ui,
+        painter: &egui::Painter,
+        render_rect: egui::Rect,
+        photo_rect: egui::Rect,
+        state: &AppState,
+        commands: &mut Vec<Command>,
+    ) {
+        let Some(snap) = &state.snap else {
+            return;
+        };
+        let image = match &snap.photo {
+            Photo::Loaded(image) => image.clone(),
+            Photo::Loading => {
+                painter.text(
+                    photo_rect.center_top() + egui::vec2(0.0, 16.0),
+                    egui::Align2::CENTER_TOP,
+                    "loading photo…",
+                    egui::FontId::proportional(14.0),
+                    egui::Color32::WHITE,
+                );
+                return;
+            }
+            Photo::Failed(e) => {
+                painter.text(
+                    photo_rect.center_top() + egui::vec2(0.0, 16.0),
+                    egui::Align2::CENTER_TOP,
+                    format!("photo: {e}"),
+                    egui::FontId::proportional(14.0),
+                    ui.visuals().error_fg_color,
+                );
+                return;
+            }
+        };
+        let stale = self
+            .photo
+            .as_ref()
+            .is_none_or(|(v, img, _)| *v != snap.view || !Arc::ptr_eq(img, &image));
+        if stale {
+            let texture = photo_texture(ui.ctx(), &image);
+            self.photo = Some((snap.view, image.clone(), texture));
+        }
+        let Some((_, _, texture)) = &self.photo else {
+            return;
+        };
+        let full_uv = egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0));
+        match state.settings.compare_mode {
+            CompareMode::SideBySide => {
+                painter.image(texture.id(), photo_rect, full_uv, egui::Color32::WHITE);
+            }
+            CompareMode::Blend => {
+                let alpha = (state.settings.compare_blend * 255.0) as u8;
+                painter.image(
+                    texture.id(),
+                    photo_rect,
+                    full_uv,
+                    egui::Color32::from_white_alpha(alpha),
+                );
+            }
+            CompareMode::Swipe => {
+                if self.swipe <= 0.0 || self.swipe > 1.0 {
+                    self.swipe = 0.5;
+                }
+                let x = photo_rect.min.x + self.swipe * photo_rect.width();
+                let left =
+                    egui::Rect::from_min_max(photo_rect.min, egui::pos2(x, photo_rect.max.y));
+                let uv =
+                    egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(self.swipe, 1.0));
+                painter.image(texture.id(), left, uv, egui::Color32::WHITE);
+                let handle = egui::Rect::from_center_size(
+                    egui::pos2(x, photo_rect.center().y),
+                    egui::vec2(12.0, photo_rect.height()),
+                );
+                let id = ui.scope_id().with("swipe-handle");
+                let r = ui.interact(handle, id, egui::Sense::drag());
+                if r.dragged() {
+                    self.swipe =
+                        (self.swipe + r.drag_delta().x / photo_rect.width()).clamp(0.01, 1.0);
+                }
+                painter.line_segment(
+                    [
+                        egui::pos2(x, photo_rect.min.y),
+                        egui::pos2(x, photo_rect.max.y),
+                    ],
+                    egui::Stroke::new(2.0, egui::Color32::WHITE),
+                );
+                painter.circle_filled(
+                    egui::pos2(x, photo_rect.center().y),
+                    6.0,
+                    egui::Color32::WHITE,
+                );
+            }
+        }
+        let name = state
+            .scene
+            .as_ref()
+            .and_then(|s| s.dataset.as_ref())
+            .and_then(|d| d.views.get(snap.view))
+            .map(|v| v.name.clone())
+            .unwrap_or_default();
+        painter.text(
+            render_rect.left_top() + egui::vec2(8.0, 8.0),
+            egui::Align2::LEFT_TOP,
+            format!("{name}: photo | render  (drag or scroll in the view to leave)"),
+            egui::FontId::proportional(13.0),
+            egui::Color32::WHITE,
+        );
+        let _ = commands;
+    }
+}

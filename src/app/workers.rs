@@ -1,0 +1,195 @@
+//! Short-lived worker threads for everything that may take longer than a frame: file dialogs,
+//! opening datasets / projects / models, loading a survey photo, rendering a PNG. Each reports
+//! once through the state's result channel; none touches the state directly.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::Context;
+use crossbeam_channel::Sender;
+
+use crate::app::commands::{Command, DialogKind};
+use crate::app::files::{self, OpenTarget};
+use crate::app::settings::Settings;
+use crate::app::state::WorkerResult;
+use crate::scene::open::OpenOptions;
+use crate::scene::project::Project;
+use crate::scene::{Camera, Dataset, ImageScale, ply};
+use crate::splats::Splats;
+
+/// Longest side of a comparison photo: enough for a viewport, cheap to upload.
+const PHOTO_MAX_WIDTH: u32 = 1600;
+
+fn spawn(name: &str, f: impl FnOnce() + Send + 'static) {
+    if let Err(e) = std::thread::Builder::new().name(name.into()).spawn(f) {
+        tracing::error!("cannot start a {name} thread: {e}");
+    }
+}
+
+/// Opens a dataset folder, a project or a PLY; reports `Opened` or an error line.
+pub fn open(path: PathBuf, results: Sender<WorkerResult>) {
+    spawn("damage-twin-open", move || {
+        let result = match open_blocking(&path) {
+            Ok(opened) => opened,
+            Err(e) => WorkerResult::Command(Command::Notify(format!("error: {e:#}"))),
+        };
+        let _ = results.send(result);
+    });
+}
+
+/// The work of `open`, on the calling thread (tests and the headless demo use it directly).
+pub fn open_blocking(path: &Path) -> anyhow::Result<WorkerResult> {
+    match files::classify(path) {
+        OpenTarget::Dataset(root) => {
+            let dataset = Dataset::open(&root, &OpenOptions::default())
+                .with_context(|| format!("opening {}", root.display()))?;
+            Ok(WorkerResult::Opened {
+                source: root,
+                dataset: Some(Arc::new(dataset)),
+                splats: None,
+                project_dir: None,
+            })
+        }
+        OpenTarget::Ply(file) => {
+            let splats =
+                ply::read_splats(&file).with_context(|| format!("reading {}", file.display()))?;
+            Ok(WorkerResult::Opened {
+                source: file,
+                dataset: None,
+                splats: Some(Arc::new(splats)),
+                project_dir: None,
+            })
+        }
+        OpenTarget::Project(file) => {
+            let project =
+                Project::load(&file).with_context(|| format!("reading {}", file.display()))?;
+            let dir = file.parent().map(Path::to_path_buf).unwrap_or_default();
+            // The latest survey is the one the twin shows.
+            let survey = project
+                .surveys
+                .last()
+                .with_context(|| format!("{} has no survey", file.display()))?;
+            let resolve = |p: &Path| {
+                if p.is_absolute() {
+                    p.to_path_buf()
+                } else {
+                    dir.join(p)
+                }
+            };
+            let dataset = if survey.dataset.as_os_str().is_empty() {
+                None
+            } else {
+                let root = resolve(&survey.dataset);
+                let options = OpenOptions {
+                    background: project.settings.background,
+                };
+                Some(Arc::new(Dataset::open(&root, &options).with_context(
+                    || format!("opening survey {} at {}", survey.name, root.display()),
+                )?))
+            };
+            let splats = match &survey.model {
+                Some(model) => {
+                    let model = resolve(model);
+                    Some(Arc::new(ply::read_splats(&model).with_context(|| {
+                        format!("reading the model {}", model.display())
+                    })?))
+                }
+                None => None,
+            };
+            Ok(WorkerResult::Opened {
+                source: file,
+                dataset,
+                splats,
+                project_dir: Some(dir),
+            })
+        }
+    }
+}
+
+/// Shows a native dialog on a worker thread; the chosen path comes back as a command.
+pub fn dialog(kind: DialogKind, start: Option<PathBuf>, results: Sender<WorkerResult>) {
+    spawn("damage-twin-dialog", move || {
+        let mut d = rfd::FileDialog::new();
+        if let Some(dir) = start.as_ref().and_then(|p| {
+            if p.is_dir() {
+                Some(p.clone())
+            } else {
+                p.parent().map(Path::to_path_buf)
+            }
+        }) {
+            d = d.set_directory(dir);
+        }
+        let command = match kind {
+            DialogKind::OpenFolder => d
+                .set_title("Open a dataset or twin folder")
+                .pick_folder()
+                .map(Command::Open),
+            DialogKind::OpenFile => d
+                .set_title("Open a twin project or a model")
+                .add_filter("twin project or PLY", &["ron", "ply"])
+                .pick_file()
+                .map(Command::Open),
+            DialogKind::SaveProject => d
+                .set_title("Save the twin into a folder")
+                .pick_folder()
+                .map(Command::SaveProject),
+            DialogKind::ExportPly => d
+                .set_title("Export the model")
+                .add_filter("PLY", &["ply"])
+                .set_file_name("model.ply")
+                .save_file()
+                .map(Command::ExportPly),
+            DialogKind::ExportPng => d
+                .set_title("Export the current view")
+                .add_filter("PNG", &["png"])
+                .set_file_name("view.png")
+                .save_file()
+                .map(Command::ExportPng),
+        };
+        let command = command.unwrap_or_else(|| {
+            Command::Notify("no file chosen (or no file dialog available)".into())
+        });
+        let _ = results.send(WorkerResult::Command(command));
+    });
+}
+
+/// Loads view `index`'s photo (at most `PHOTO_MAX_WIDTH` wide) for the comparison.
+pub fn load_photo(dataset: Arc<Dataset>, index: usize, results: Sender<WorkerResult>) {
+    spawn("damage-twin-photo", move || {
+        let width = dataset
+            .views
+            .get(index)
+            .map(|v| v.camera.intrinsics.width)
+            .unwrap_or(PHOTO_MAX_WIDTH);
+        let scale = if width > PHOTO_MAX_WIDTH {
+            ImageScale::Width(PHOTO_MAX_WIDTH)
+        } else {
+            ImageScale::Factor(1)
+        };
+        let result = dataset
+            .load_view(index, scale)
+            .map(|v| Arc::new(v.image))
+            .map_err(|e| e.to_string());
+        let _ = results.send(WorkerResult::Photo {
+            view: index,
+            result,
+        });
+    });
+}
+
+/// Renders the model from `camera` on the CPU reference renderer and writes a PNG.
+pub fn export_png(
+    path: PathBuf,
+    splats: Arc<Splats>,
+    camera: Camera,
+    settings: Settings,
+    results: Sender<WorkerResult>,
+) {
+    spawn("damage-twin-png", move || {
+        let line = match crate::app::snapshot::render_png(&path, &splats, &camera, &settings) {
+            Ok(()) => format!("exported {}", path.display()),
+            Err(e) => format!("error: {e:#}"),
+        };
+        let _ = results.send(WorkerResult::Command(Command::Notify(line)));
+    });
+}
