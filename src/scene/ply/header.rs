@@ -108,6 +108,13 @@ impl Element {
         self.properties.iter().position(|p| p.name == name)
     }
 
+    /// Index of a property every reader of this element needs; its absence is an error naming
+    /// the file.
+    pub fn require(&self, name: &str, path: &Path) -> Result<usize, SceneError> {
+        self.find(name)
+            .ok_or_else(|| SceneError::invalid(path, format!("missing required property `{name}`")))
+    }
+
     /// Bytes per row in a binary file, `None` when a list property makes rows variable.
     fn binary_stride(&self) -> Option<usize> {
         self.properties
@@ -134,6 +141,16 @@ pub struct Header {
     pub elements: Vec<Element>,
     /// Bytes of header text, `end_header` line included: where the data starts.
     pub data_offset: u64,
+}
+
+impl Header {
+    /// The element called `name`; its absence is an error naming the file.
+    pub fn element(&self, name: &str, path: &Path) -> Result<&Element, SceneError> {
+        self.elements
+            .iter()
+            .find(|e| e.name == name)
+            .ok_or_else(|| SceneError::invalid(path, format!("no {name} element")))
+    }
 }
 
 /// Reads one header line (up to `\n`), refusing headers beyond `MAX_HEADER_BYTES`.

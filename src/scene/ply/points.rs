@@ -19,16 +19,8 @@ const DEFAULT_GREY: [u8; 3] = [128, 128, 128];
 pub fn read_point_cloud(path: &Path) -> Result<PointCloud, SceneError> {
     let (header, mut rows) = RowReader::open(path, "vertex")?;
     let bad = |msg: String| SceneError::invalid(path, msg);
-    let vertex = header
-        .elements
-        .iter()
-        .find(|e| e.name == "vertex")
-        .ok_or_else(|| bad("no vertex element".into()))?;
-    let require = |name: &str| {
-        vertex
-            .find(name)
-            .ok_or_else(|| bad(format!("missing required property `{name}`")))
-    };
+    let vertex = header.element("vertex", path)?;
+    let require = |name: &str| vertex.require(name, path);
     let xyz = [require("x")?, require("y")?, require("z")?];
     let rgb = match (
         vertex.find("red"),

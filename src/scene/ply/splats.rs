@@ -111,16 +111,8 @@ pub fn write_splats(path: &Path, splats: &Splats) -> Result<(), SceneError> {
 pub fn read_splats(path: &Path) -> Result<Splats, SceneError> {
     let (header, mut rows) = RowReader::open(path, "vertex")?;
     let bad = |msg: String| SceneError::invalid(path, msg);
-    let vertex = header
-        .elements
-        .iter()
-        .find(|e| e.name == "vertex")
-        .ok_or_else(|| bad("no vertex element".into()))?;
-    let require = |name: &str| {
-        vertex
-            .find(name)
-            .ok_or_else(|| bad(format!("missing required property `{name}`")))
-    };
+    let vertex = header.element("vertex", path)?;
+    let require = |name: &str| vertex.require(name, path);
     let mut rest_count = 0;
     while vertex.find(&format!("f_rest_{rest_count}")).is_some() {
         rest_count += 1;
