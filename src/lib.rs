@@ -9,6 +9,7 @@ pub mod damage;
 pub mod gpu;
 pub mod metrics;
 pub mod raster;
+pub mod report;
 pub mod scene;
 pub mod splats;
 pub mod synth;

@@ -11,28 +11,7 @@ use crate::damage::DamageClass;
 pub const STORAGE_KEY: &str = "damage-twin.settings";
 
 /// What the trainer optimises (issue 7: the viewer picks the mode).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
-pub enum TrainMode {
-    /// Photos only.
-    Rgb,
-    /// Photos with the damage masks painted on in the class colours (the published method).
-    Overlay,
-    /// Photos as RGB target plus one label channel per damage class (ours).
-    #[default]
-    Label,
-}
-
-impl TrainMode {
-    pub const ALL: [TrainMode; 3] = [TrainMode::Rgb, TrainMode::Overlay, TrainMode::Label];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            TrainMode::Rgb => "rgb",
-            TrainMode::Overlay => "overlay",
-            TrainMode::Label => "label",
-        }
-    }
-}
+pub use crate::damage::TrainMode;
 
 /// How the photo of a snapped survey view is compared with the render.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]

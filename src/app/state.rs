@@ -398,9 +398,15 @@ impl AppState {
             return;
         }
         self.history.clear();
+        // Overlay training paints the masks in the damage layer's colours, so what the layer
+        // shows and what the twin learns agree.
+        let palette = crate::damage::Palette {
+            colours: self.settings.damage.colours,
+        };
         self.training = Some(TrainingSession::start(
             dataset,
             self.settings.training.clone(),
+            palette,
             self.settings.background,
         ));
         self.log_line("training started");

@@ -60,6 +60,7 @@ impl TrainingSession {
     pub fn start(
         dataset: Arc<Dataset>,
         settings: TrainingSettings,
+        palette: crate::damage::Palette,
         background: [f32; 3],
     ) -> TrainingSession {
         let options = JobOptions {
@@ -71,9 +72,9 @@ impl TrainingSession {
             ),
             snapshot_interval: Some(Duration::from_millis(250)),
         };
-        let for_worker = settings.clone();
+        let config = train_setup::run_config(&settings, palette, background);
         let job = TrainJob::spawn_with(
-            move |log| train_setup::setup(&dataset, &for_worker, background, Some(log)),
+            move |log| train_setup::setup(&dataset, &config, Some(log)),
             options,
         );
         TrainingSession {

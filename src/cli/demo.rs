@@ -12,6 +12,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use damage_twin::app::history::{EvalSample, History, Sample};
 use damage_twin::app::settings::{Settings, TrainMode, TrainingSettings};
 use damage_twin::app::{chart_export, demo, files, snapshot, train_setup};
+use damage_twin::damage::evaluate::DamageReadout;
+use damage_twin::damage::setup::effective_mode;
 use damage_twin::scene::Dataset;
 use damage_twin::scene::open::OpenOptions;
 use damage_twin::train::job::{JobEvent, JobOptions, TrainJob};
@@ -37,17 +39,10 @@ pub struct Args {
     height: u32,
     /// Training mode: rgb, overlay or label.
     #[arg(long, default_value = "label")]
-    mode: String,
+    mode: TrainMode,
     /// Held-out views rendered into `renders/`.
     #[arg(long, default_value_t = 3)]
     renders: usize,
-}
-
-fn parse_mode(text: &str) -> anyhow::Result<TrainMode> {
-    TrainMode::ALL
-        .into_iter()
-        .find(|m| m.name() == text)
-        .with_context(|| format!("unknown mode {text:?} (rgb, overlay or label)"))
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -84,7 +79,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let training = TrainingSettings {
         iterations: args.iterations,
         resolution_factor: 1,
-        mode: parse_mode(&args.mode)?,
+        mode: args.mode,
         ..TrainingSettings::default()
     };
     let settings = Settings {
@@ -92,8 +87,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..Settings::default()
     };
     let for_worker = dataset.clone();
+    let palette = damage_twin::damage::Palette {
+        colours: settings.damage.colours,
+    };
+    let config = train_setup::run_config(&training, palette, [0.0; 3]);
+    let (_, heldout_indices) = damage_twin::train::views::split_views(&dataset, &config.holdout)
+        .map_err(anyhow::Error::msg)?;
+    let (eval_scale, eval_mode) = (config.scale, effective_mode(&dataset, config.mode));
     let job = TrainJob::spawn_with(
-        move |log| train_setup::setup(&for_worker, &training, [0.0; 3], Some(log)),
+        move |log| train_setup::setup(&for_worker, &config, Some(log)),
         JobOptions {
             threads: None,
             snapshot_interval: None,
@@ -159,6 +161,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.renders,
     )?;
     let charts = chart_export::write_training_charts(&args.out, &history)?;
+    let readout = DamageReadout {
+        mode: eval_mode,
+        ..DamageReadout::for_model(&outcome.splats, palette)
+    };
+    let damage = crate::cli::train::damage_figures(
+        &dataset,
+        &heldout_indices,
+        eval_scale,
+        &outcome.splats,
+        &readout,
+        glam::Vec3::ZERO,
+    )?
+    .map(|(_, figures)| figures);
+    if let Some(d) = &damage {
+        eprintln!("held-out damage IoU: {:?}", d.iou);
+    }
     let metrics = serde_json::json!({
         "dataset": data_dir,
         "views": dataset.views.len(),
@@ -170,6 +188,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "total_seconds": started.elapsed().as_secs_f64(),
         "heldout_psnr": outcome.heldout.as_ref().map(|s| s.psnr),
         "heldout_ssim": outcome.heldout.as_ref().map(|s| s.ssim),
+        "damage": damage,
         "rolled_back_steps": outcome.rolled_back,
         "peak_rss_mb": damage_twin::metrics::peak_rss_mb(),
         "renders": renders,

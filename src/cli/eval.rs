@@ -11,7 +11,10 @@ use damage_twin::scene::ImageScale;
 use damage_twin::train::trainer::evaluate_views;
 use damage_twin::train::views::{load_views, split_views};
 
-use super::train::{holdout, open_dataset, parse_background, parse_scale};
+use damage_twin::damage::TrainMode;
+use damage_twin::damage::evaluate::{DamageFigures, DamageReadout};
+
+use super::train::{damage_figures, holdout, open_dataset, palette, parse_background, parse_scale};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -30,6 +33,16 @@ pub struct Args {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+    /// How rendered damage is read: label (label channels at 0.5) or overlay (class colours);
+    /// default: label when the model has label channels, else overlay.
+    #[arg(long)]
+    pub mode: Option<TrainMode>,
+    /// Class colour override for overlay mode, class=r,g,b (repeatable).
+    #[arg(long = "colour")]
+    pub colours: Vec<String>,
+    /// Overlay mode: colour distance (8-bit RGB) within which a pixel is a class colour.
+    #[arg(long, default_value_t = damage_twin::damage::overlay::OVERLAY_TOLERANCE)]
+    pub tolerance: f32,
 }
 
 #[derive(Serialize)]
@@ -45,6 +58,12 @@ struct Report {
     ssim: f64,
     views: Vec<ViewScore>,
     gaussians: usize,
+    /// How damage was read (absent without masks).
+    damage_mode: Option<TrainMode>,
+    damage_reference: Option<String>,
+    /// Per-class `iou`, `precision`, `recall`, `f1` on the held-out views.
+    #[serde(flatten)]
+    damage: Option<DamageFigures>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -75,12 +94,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ssim: s.ssim,
         });
     }
+    let mut readout = DamageReadout::for_model(&splats, palette(&args.colours)?);
+    readout.tolerance = args.tolerance;
+    if let Some(mode) = args.mode {
+        readout.mode = mode;
+    }
+    let damage = damage_figures(
+        &dataset,
+        &test_idx,
+        args.scale,
+        &splats,
+        &readout,
+        args.background,
+    )?;
     let n = per_view.len() as f64;
     let report = Report {
         psnr: per_view.iter().map(|v| v.psnr).sum::<f64>() / n,
         ssim: per_view.iter().map(|v| v.ssim).sum::<f64>() / n,
         views: per_view,
         gaussians: splats.len(),
+        damage_mode: damage.as_ref().map(|_| readout.mode),
+        damage_reference: damage.as_ref().map(|d| d.0.clone()),
+        damage: damage.map(|d| d.1),
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -95,6 +130,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             report.ssim,
             report.gaussians
         );
+        if let (Some(d), Some(mode)) = (&report.damage, report.damage_mode) {
+            println!(
+                "damage ({mode} mode, against {}):",
+                report.damage_reference.as_deref().unwrap_or("-")
+            );
+            for (class, iou) in &d.iou {
+                println!(
+                    "  {class:<10} IoU {iou:.3}  precision {:.3}  recall {:.3}  F1 {:.3}  ({} reference pixels)",
+                    d.precision[class], d.recall[class], d.f1[class], d.reference_pixels[class]
+                );
+            }
+        }
     }
     Ok(())
 }

@@ -7,6 +7,7 @@ mod demo;
 mod eval;
 mod inspect;
 mod render;
+mod study;
 mod synth;
 mod train;
 
@@ -41,6 +42,9 @@ enum Command {
     Bench(bench::Args),
     /// Milliseconds per frame by stage, GPU (wgpu) and CPU side by side (JSON).
     BenchRender(bench_render::Args),
+    /// Studies that measure the twin (mask-noise: how much segmentation error it removes).
+    #[command(subcommand)]
+    Study(study::Study),
     /// The built-in demo building: the app, or with --headless synth + train + eval + charts.
     Demo(demo::Args),
 }
@@ -57,6 +61,7 @@ pub fn main() -> ExitCode {
         Some(Command::Render(args)) => render::run(args),
         Some(Command::Bench(args)) => bench::run(args),
         Some(Command::BenchRender(args)) => bench_render::run(args),
+        Some(Command::Study(study)) => study::run(study),
         Some(Command::Demo(args)) => demo::run(args),
     };
     match result {

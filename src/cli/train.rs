@@ -10,13 +10,16 @@ use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
+use damage_twin::damage::evaluate::{DamageFigures, DamageReadout, evaluate_damage};
+use damage_twin::damage::reference::{load_reference_views, reference_source};
+use damage_twin::damage::setup::{RunConfig, effective_mode, prepare_run};
+use damage_twin::damage::{Palette, TrainMode};
 use damage_twin::metrics::peak_rss_mb;
 use damage_twin::scene::open::OpenOptions;
 use damage_twin::scene::{Dataset, ImageScale};
-use damage_twin::train::job::{JobEvent, JobOptions, TrainJob, TrainSetup};
-use damage_twin::train::spec::{DensifyPolicy, TrainSpec};
+use damage_twin::train::job::{JobEvent, JobOptions, TrainJob};
 use damage_twin::train::trainer::StageTimes;
-use damage_twin::train::views::{Holdout, InitialModel, initial_splats, load_views, split_views};
+use damage_twin::train::views::{Holdout, load_views, split_views};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -58,6 +61,52 @@ pub struct Args {
     /// No progress bar (log lines only).
     #[arg(long)]
     pub quiet: bool,
+    /// Damage supervision: rgb, overlay (masks painted into the photos) or label (per-Gaussian
+    /// damage channels). Damage modes fall back to rgb on a dataset without masks.
+    #[arg(long, default_value = "label")]
+    pub mode: TrainMode,
+    /// Weight of the label loss beside the photometric loss (label mode).
+    #[arg(long, default_value_t = 0.1)]
+    pub label_weight: f32,
+    /// Class colour override for overlay mode, class=r,g,b (repeatable), e.g. crack=0,0,255.
+    #[arg(long = "colour")]
+    pub colours: Vec<String>,
+    /// Weight of damage pixels in the label cross-entropy (label mode).
+    #[arg(long, default_value_t = RunConfig::default().label_pos_weight)]
+    pub label_pos_weight: f32,
+    /// Learning rate of the label logits (label mode).
+    #[arg(long, default_value_t = RunConfig::default().label_lr.unwrap_or(0.05))]
+    pub label_lr: f32,
+}
+
+/// The palette with the user's `--colour` overrides.
+pub fn palette(overrides: &[String]) -> anyhow::Result<Palette> {
+    let mut palette = Palette::default();
+    for text in overrides {
+        palette.set_from_text(text).map_err(anyhow::Error::msg)?;
+    }
+    Ok(palette)
+}
+
+/// Damage figures of `splats` on the views `indices` against the reference masks (`truth/` when
+/// present); None when the dataset has no masks or nothing is evaluated.
+pub fn damage_figures(
+    dataset: &Dataset,
+    indices: &[usize],
+    scale: ImageScale,
+    splats: &damage_twin::splats::Splats,
+    readout: &DamageReadout,
+    background: Vec3,
+) -> anyhow::Result<Option<(String, DamageFigures)>> {
+    let Some(source) = reference_source(dataset) else {
+        return Ok(None);
+    };
+    if indices.is_empty() || readout.mode == TrainMode::Rgb {
+        return Ok(None);
+    }
+    let views = load_reference_views(dataset, &source, indices, scale)?;
+    let scores = evaluate_damage(splats, &views, readout, background);
+    Ok(Some((source.dir().display().to_string(), scores.figures())))
 }
 
 pub fn parse_scale(text: &str) -> Result<ImageScale, String> {
@@ -124,6 +173,12 @@ struct Metrics {
     rolled_back: u32,
     cancelled: bool,
     stage_ms_per_iteration: StageTimes,
+    mode: TrainMode,
+    /// Rendered damage against the reference masks on the held-out views.
+    damage: Option<DamageFigures>,
+    /// The same on the training views.
+    damage_train: Option<DamageFigures>,
+    damage_reference: Option<String>,
 }
 
 /// A log line above the bar, or on stderr when the bar is hidden (`println` of a hidden bar
@@ -146,58 +201,43 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output folder {}", args.out.display()))?;
 
-    let mut spec = TrainSpec::reconstruction(args.iters);
-    spec.scale = args.scale;
-    spec.sh_degree = args.sh_degree;
-    spec.seed = args.seed;
-    spec.background = args.background;
-    spec.eval_every = args.eval_every;
-    if let Some(max) = args.max_gaussians {
-        spec.densify = DensifyPolicy::Budget { max };
-    }
+    let config = RunConfig {
+        mode: args.mode,
+        palette: palette(&args.colours)?,
+        scale: args.scale,
+        iterations: args.iters,
+        holdout: holdout(args.test_every, &args.test_views),
+        sh_degree: args.sh_degree,
+        seed: args.seed,
+        background: args.background,
+        label_weight: args.label_weight,
+        label_pos_weight: args.label_pos_weight,
+        label_lr: Some(args.label_lr),
+        random_points: args.init_points,
+        eval_every: args.eval_every,
+        max_gaussians: args.max_gaussians,
+    };
+    let mode = effective_mode(&dataset, args.mode);
     let heldout_names: Vec<String> = test_idx
         .iter()
         .map(|&i| dataset.views[i].name.clone())
         .collect();
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
 
-    let init = InitialModel {
-        sh_degree: args.sh_degree,
-        label_channels: 0,
-        random_points: args.init_points,
-        seed: args.seed,
-    };
     let load_dataset = dataset.clone();
-    let (train_for_setup, test_for_setup) = (train_idx.clone(), test_idx.clone());
     let job = TrainJob::spawn_with(
         move |events| {
-            let views = load_views(&load_dataset, &train_for_setup, spec.scale, false)
-                .map_err(|e| e.to_string())?;
-            let heldout = load_views(&load_dataset, &test_for_setup, spec.scale, false)
-                .map_err(|e| e.to_string())?;
-            let splats = initial_splats(&load_dataset, &views, &init)
-                .map_err(|e| format!("initial Gaussians: {e}"))?;
-            let _ = events.send(JobEvent::Log(format!(
-                "loaded {} training and {} held-out views at {}x{}; {} initial Gaussians",
-                views.len(),
-                heldout.len(),
-                views[0].image.width,
-                views[0].image.height,
-                splats.len()
-            )));
-            Ok(TrainSetup {
-                spec,
-                splats,
-                views,
-                heldout,
-            })
+            let run = prepare_run(&load_dataset, &config)?;
+            for note in run.notes {
+                let _ = events.send(JobEvent::Log(note));
+            }
+            Ok(run.setup)
         },
         JobOptions {
             threads: args.threads,
             snapshot_interval: None,
         },
     );
-
     let bar = if args.quiet {
         ProgressBar::hidden()
     } else {
@@ -288,6 +328,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.sh_degree,
     )
     .map(|s| s.psnr);
+    let readout = DamageReadout {
+        mode,
+        ..DamageReadout::for_model(&outcome.splats, palette(&args.colours)?)
+    };
+    let damage = damage_figures(
+        &dataset,
+        &test_idx,
+        args.scale,
+        &outcome.splats,
+        &readout,
+        args.background,
+    )?;
+    let damage_train = damage_figures(
+        &dataset,
+        &train_idx,
+        args.scale,
+        &outcome.splats,
+        &readout,
+        args.background,
+    )?;
     let (width, height) = train_views
         .first()
         .map(|v| (v.image.width, v.image.height))
@@ -310,6 +370,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         rolled_back: outcome.rolled_back,
         cancelled: outcome.cancelled,
         stage_ms_per_iteration: outcome.timings.per_step_ms(outcome.steps),
+        mode,
+        damage_reference: damage
+            .as_ref()
+            .or(damage_train.as_ref())
+            .map(|d| d.0.clone()),
+        damage: damage.map(|d| d.1),
+        damage_train: damage_train.map(|d| d.1),
     };
     let metrics_path = args.out.join("metrics.json");
     std::fs::write(&metrics_path, serde_json::to_string_pretty(&metrics)?)

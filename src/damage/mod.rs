@@ -1,6 +1,16 @@
-//! Damage: classes and colours, and (later) overlay targets, label channels, selection, hull masks
-//! and refinement. Uses the engine; contains no rendering or optimisation of its own.
+//! Damage: classes and colours, the supervision modes (overlay targets, label channels), reading
+//! rendered damage back and scoring it, and the mask-noise study. Uses the engine; contains no
+//! rendering or optimisation of its own.
 
 pub mod classes;
+pub mod evaluate;
+pub mod mode;
+pub mod overlay;
+pub mod palette;
+pub mod reference;
+pub mod setup;
 
 pub use classes::{DamageClass, NEW_DAMAGE_COLOUR};
+pub use mode::TrainMode;
+pub use palette::Palette;
+pub mod study;

@@ -2,9 +2,11 @@
 //! undistort to the view's pinhole, resize to the requested scale with its camera and masks.
 //! Also the image/mask save helpers. No dataset discovery (that is `open`), no training logic.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::scene::masks::{read_view_masks, resize_mask_nearest};
+use crate::damage::DamageClass;
+use crate::scene::masks::{read_view_masks, resize_mask};
 use crate::scene::undistort::{undistort_mask, undistort_rgb};
 use crate::scene::{
     Camera, Dataset, Distortion, ImageScale, LoadedView, Mask, RgbImage, SceneError,
@@ -183,7 +185,7 @@ fn scale_distortion(d: &Distortion, sx: f32, sy: f32) -> Distortion {
 impl Dataset {
     /// Loads view `index` at `scale`: pixels (alpha composited on `self.background`),
     /// undistorted when the view has a distortion, resized, with the camera resized to match and
-    /// the view's damage masks (nearest-neighbour). An image whose size disagrees with its
+    /// the view's damage masks (a downscaled pixel is damage when any pixel under it is). An image whose size disagrees with its
     /// camera is an error naming the file — unless it is the camera's size divided by 2, 4 or 8
     /// (a pre-downscaled copy), in which case the intrinsics are scaled to the image.
     pub fn load_view(&self, index: usize, scale: ImageScale) -> Result<LoadedView, SceneError> {
@@ -229,7 +231,7 @@ impl Dataset {
         let (width, height) = scale.apply(stored.0, stored.1);
         let image = resize_rgb(&image, width, height);
         for mask in masks.values_mut() {
-            *mask = resize_mask_nearest(mask, width, height);
+            *mask = resize_mask(mask, width, height);
         }
         Ok(LoadedView {
             name: view.name.clone(),
@@ -237,6 +239,57 @@ impl Dataset {
             image,
             masks,
         })
+    }
+}
+
+impl Dataset {
+    /// The damage masks of view `index` read from another mask folder (e.g. a synthetic survey's
+    /// clean `truth/masks/`), prepared exactly as `load_view` prepares the dataset's own: checked
+    /// against the stored image size, undistorted, resized to `scale`.
+    pub fn load_view_masks(
+        &self,
+        index: usize,
+        masks_dir: &Path,
+        scale: ImageScale,
+    ) -> Result<BTreeMap<DamageClass, Mask>, SceneError> {
+        let view = self.views.get(index).ok_or_else(|| {
+            SceneError::invalid(
+                &self.root,
+                format!("view {index} does not exist ({} views)", self.views.len()),
+            )
+        })?;
+        let path = &view.image_path;
+        let stored = image::image_dimensions(path)
+            .map_err(|e| SceneError::invalid(path, format!("cannot read the image size: {e}")))?;
+        let k = view.camera.intrinsics;
+        let mut camera = view.camera;
+        let mut distortion = view.distortion;
+        if stored != (k.width, k.height) {
+            if downscale_factor((k.width, k.height), stored).is_none() {
+                return Err(SceneError::invalid(
+                    path,
+                    format!(
+                        "image is {}×{} but its camera is {}×{}",
+                        stored.0, stored.1, k.width, k.height
+                    ),
+                ));
+            }
+            camera = camera.resized(stored.0, stored.1);
+            let (sx, sy) = (
+                stored.0 as f32 / k.width as f32,
+                stored.1 as f32 / k.height as f32,
+            );
+            distortion = distortion.map(|d| scale_distortion(&d, sx, sy));
+        }
+        let mut masks = read_view_masks(masks_dir, &view.name, path, stored)?;
+        let (width, height) = scale.apply(stored.0, stored.1);
+        for mask in masks.values_mut() {
+            if let Some(d) = &distortion {
+                *mask = undistort_mask(mask, d, &camera.intrinsics);
+            }
+            *mask = resize_mask(mask, width, height);
+        }
+        Ok(masks)
     }
 }
 

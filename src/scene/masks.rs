@@ -224,6 +224,39 @@ pub fn read_view_masks(
     Ok(masks)
 }
 
+/// Resizes a 0/1 mask for training and evaluation at a lower resolution: a downscaled pixel is
+/// damage when any source pixel under its footprint is, so a 1-pixel crack stays a connected
+/// 1-pixel line at half size instead of breaking into dashes (nearest-neighbour keeps or drops
+/// whole rows and columns). Upscaling (and the same size) is nearest-neighbour.
+pub fn resize_mask(mask: &Mask, width: u32, height: u32) -> Mask {
+    let (sw, sh) = (mask.width as usize, mask.height as usize);
+    let (w, h) = (width as usize, height as usize);
+    if w >= sw || h >= sh || w == 0 || h == 0 {
+        return resize_mask_nearest(mask, width, height);
+    }
+    // Footprint of output pixel i: source [floor(i·s/w), ceil((i+1)·s/w)).
+    let span = |i: usize, source: usize, target: usize| {
+        let start = i * source / target;
+        let end = ((i + 1) * source).div_ceil(target).clamp(start + 1, source);
+        start..end
+    };
+    let mut out = Mask::empty(width, height);
+    let mut row = vec![0u8; w];
+    for y in 0..h {
+        row.fill(0);
+        for sy in span(y, sh, h) {
+            let src = &mask.data[sy * sw..(sy + 1) * sw];
+            for (x, r) in row.iter_mut().enumerate() {
+                if *r == 0 && span(x, sw, w).any(|sx| src[sx] != 0) {
+                    *r = 1;
+                }
+            }
+        }
+        out.data[y * w..(y + 1) * w].copy_from_slice(&row);
+    }
+    out
+}
+
 /// Nearest-neighbour resize (pixel centres at +0.5, as in image resamplers), keeping 0/1 labels.
 pub fn resize_mask_nearest(mask: &Mask, width: u32, height: u32) -> Mask {
     if (mask.width, mask.height) == (width, height) {
@@ -251,6 +284,32 @@ pub fn resize_mask_nearest(mask: &Mask, width: u32, height: u32) -> Mask {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn downscaled_masks_keep_thin_lines_connected() {
+        // A 1-pixel diagonal at even positions: nearest-neighbour at half size samples the odd
+        // pixels (centres at +0.5) only and loses it completely.
+        let mut mask = Mask::empty(8, 8);
+        for i in 0..4 {
+            mask.data[2 * i * 8 + 2 * i] = 1;
+        }
+        assert!(
+            resize_mask_nearest(&mask, 4, 4)
+                .data
+                .iter()
+                .all(|&v| v == 0)
+        );
+        let half = resize_mask(&mask, 4, 4);
+        for y in 0..4 {
+            for x in 0..4 {
+                assert_eq!(half.data[y * 4 + x], u8::from(x == y), "pixel {x},{y}");
+            }
+        }
+        // Non-integer factors cover every source pixel; upscaling is nearest-neighbour.
+        let odd = resize_mask(&mask, 3, 3);
+        assert!((0..3).all(|i| odd.data[i * 3 + i] != 0));
+        assert_eq!(resize_mask(&half, 8, 8), resize_mask_nearest(&half, 8, 8));
+    }
 
     fn write_rgb(path: &Path, w: u32, h: u32, f: impl Fn(u32, u32) -> [u8; 3]) {
         let img = image::RgbImage::from_fn(w, h, |x, y| image::Rgb(f(x, y)));

@@ -3,6 +3,7 @@
 //! buffers only; the clean masks are kept elsewhere and must never be passed here.
 
 use super::noise::value_noise;
+use crate::damage::DamageClass;
 
 /// Exactly `round(fraction · n)` views, chosen by the seed.
 pub fn noisy_views(n: usize, fraction: f32, seed: u64) -> Vec<bool> {
@@ -14,6 +15,24 @@ pub fn noisy_views(n: usize, fraction: f32, seed: u64) -> Vec<bool> {
         noisy[i] = true;
     }
     noisy
+}
+
+/// Corrupts one view's mask of `class` the way `synth --mask-noise` does: two false and two
+/// missed blobs for cracks, one or two of each for spalling, at most one added for rebar.
+pub fn corrupt_class_mask(
+    class: DamageClass,
+    mask: &mut [u8],
+    width: usize,
+    height: usize,
+    building: &[bool],
+    rng: &mut fastrand::Rng,
+) {
+    let (adds, removes) = match class {
+        DamageClass::Crack => (2, 2),
+        DamageClass::Spalling => (1 + rng.usize(0..2), 1 + rng.usize(0..2)),
+        DamageClass::Rebar => (rng.usize(0..2), 1),
+    };
+    corrupt_mask(mask, width, height, building, adds, removes, rng);
 }
 
 /// Adds and removes blobs in one binary (0/1) mask of `width × height`; `building` marks pixels

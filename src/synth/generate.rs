@@ -270,18 +270,12 @@ fn write_view(
         )?;
         let written = if noisy {
             let mut m = clean;
-            let (adds, removes) = match class {
-                DamageClass::Crack => (2, 2),
-                DamageClass::Spalling => (1 + noise_rng.usize(0..2), 1 + noise_rng.usize(0..2)),
-                DamageClass::Rebar => (noise_rng.usize(0..2), 1),
-            };
-            corrupt::corrupt_mask(
+            corrupt::corrupt_class_mask(
+                class,
                 &mut m,
                 w as usize,
                 h as usize,
                 &building,
-                adds,
-                removes,
                 &mut noise_rng,
             );
             m

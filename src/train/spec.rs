@@ -106,6 +106,14 @@ pub struct Targets {
     pub ssim_lambda: f32,
     /// Weight of the per-class binary cross-entropy on label channels; 0 disables it.
     pub label_weight: f32,
+    /// Weight of damage pixels inside the cross-entropy: damage is rare and thin, and a Gaussian
+    /// straddling a one-pixel crack sees mostly background, so > 1 keeps recall up.
+    #[serde(default = "default_pos_weight")]
+    pub label_pos_weight: f32,
+}
+
+fn default_pos_weight() -> f32 {
+    1.0
 }
 
 impl Default for Targets {
@@ -114,6 +122,7 @@ impl Default for Targets {
             rgb_weight: 1.0,
             ssim_lambda: 0.2,
             label_weight: 0.0,
+            label_pos_weight: default_pos_weight(),
         }
     }
 }

@@ -245,7 +245,10 @@ impl Trainer {
             groups,
             extent,
             loss_ws: LossWorkspace::new(),
-            label_params: LabelLossParams::default(),
+            label_params: LabelLossParams {
+                pos_weight: spec.targets.label_pos_weight,
+                ..LabelLossParams::default()
+            },
             v_color: Vec::new(),
             v_labels: Vec::new(),
             rng,

@@ -1,0 +1,208 @@
+//! Agreement of rendered damage with reference masks, per class over many views: IoU, precision,
+//! recall and F1. Label mode reads the blended label channels at 0.5; overlay mode reads class
+//! colours back from the RGB render.
+
+use std::collections::BTreeMap;
+
+use glam::Vec3;
+use serde::Serialize;
+
+use crate::damage::overlay::detect_overlay;
+use crate::damage::{DamageClass, Palette, TrainMode};
+use crate::metrics::MaskAgreement;
+use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
+use crate::scene::{Camera, Mask};
+use crate::splats::Splats;
+
+/// A rendered label channel above this is damage.
+pub const LABEL_THRESHOLD: f32 = 0.5;
+
+/// How rendered damage is read.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DamageReadout {
+    pub mode: TrainMode,
+    pub palette: Palette,
+    /// Overlay mode: colour distance (8-bit RGB units) within which a pixel is a class colour.
+    pub tolerance: f32,
+}
+
+impl DamageReadout {
+    /// Label mode when the model carries label channels, else overlay mode.
+    pub fn for_model(splats: &Splats, palette: Palette) -> DamageReadout {
+        let mode = if splats.label_channels >= DamageClass::ALL.len() {
+            TrainMode::Label
+        } else {
+            TrainMode::Overlay
+        };
+        DamageReadout {
+            mode,
+            palette,
+            tolerance: crate::damage::overlay::OVERLAY_TOLERANCE,
+        }
+    }
+}
+
+/// Per class the predicted mask of one render (`DamageClass::ALL` order). Label mode on a model
+/// without label channels, and RGB mode, predict nothing.
+pub fn predicted_masks(out: &RenderOutput, readout: &DamageReadout) -> Vec<Mask> {
+    let (w, h) = (out.width, out.height);
+    match readout.mode {
+        TrainMode::Overlay => detect_overlay(&out.color, w, h, &readout.palette, readout.tolerance),
+        TrainMode::Label if out.label_channels >= DamageClass::ALL.len() => DamageClass::ALL
+            .iter()
+            .map(|class| {
+                let k = class.channel();
+                Mask {
+                    width: w,
+                    height: h,
+                    data: out
+                        .labels
+                        .chunks_exact(out.label_channels)
+                        .map(|l| u8::from(l[k] > LABEL_THRESHOLD))
+                        .collect(),
+                }
+            })
+            .collect(),
+        _ => DamageClass::ALL.iter().map(|_| Mask::empty(w, h)).collect(),
+    }
+}
+
+/// Per-class pixel counts over the evaluated views.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct DamageScores {
+    pub views: usize,
+    /// Classes that had a reference mask in at least one view.
+    pub classes: BTreeMap<DamageClass, MaskAgreement>,
+}
+
+impl DamageScores {
+    /// Adds one view: `predicted` and `reference` per class in `DamageClass::ALL` order; a class
+    /// without a reference mask is not counted.
+    pub fn add_view(&mut self, predicted: &[Mask], reference: &[Option<Mask>]) {
+        self.views += 1;
+        for ((class, p), r) in DamageClass::ALL.iter().zip(predicted).zip(reference) {
+            let Some(r) = r else { continue };
+            if p.data.len() != r.data.len() {
+                continue;
+            }
+            self.classes.entry(*class).or_default().accumulate(
+                p.data.iter().map(|&v| v != 0),
+                r.data.iter().map(|&v| v != 0),
+            );
+        }
+    }
+
+    /// One figure per class, keyed by class identifier (the JSON shape of `eval --json`).
+    pub fn per_class(&self, figure: impl Fn(&MaskAgreement) -> f64) -> BTreeMap<String, f64> {
+        self.classes
+            .iter()
+            .map(|(class, a)| (class.id().to_string(), figure(a)))
+            .collect()
+    }
+}
+
+/// Per-class figures, the JSON shape of `eval --json` and `metrics.json`: class → value.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct DamageFigures {
+    /// Views evaluated.
+    pub mask_views: usize,
+    pub iou: BTreeMap<String, f64>,
+    pub precision: BTreeMap<String, f64>,
+    pub recall: BTreeMap<String, f64>,
+    pub f1: BTreeMap<String, f64>,
+    /// Reference damage pixels per class (how much there was to find).
+    pub reference_pixels: BTreeMap<String, u64>,
+}
+
+impl DamageScores {
+    pub fn figures(&self) -> DamageFigures {
+        DamageFigures {
+            mask_views: self.views,
+            iou: self.per_class(MaskAgreement::iou),
+            precision: self.per_class(MaskAgreement::precision),
+            recall: self.per_class(MaskAgreement::recall),
+            f1: self.per_class(MaskAgreement::f1),
+            reference_pixels: self
+                .classes
+                .iter()
+                .map(|(c, a)| (c.id().to_string(), a.true_positive + a.false_negative))
+                .collect(),
+        }
+    }
+}
+
+/// One view to evaluate: its camera (at the evaluation scale) and reference masks.
+pub struct ReferenceView {
+    pub name: String,
+    pub camera: Camera,
+    pub reference: Vec<Option<Mask>>,
+}
+
+/// Renders every view and scores its damage against the references.
+pub fn evaluate_damage(
+    splats: &Splats,
+    views: &[ReferenceView],
+    readout: &DamageReadout,
+    background: Vec3,
+) -> DamageScores {
+    let settings = RenderSettings::new(background, splats.sh_degree);
+    let mut rasterizer = Rasterizer::new();
+    let mut out = RenderOutput::default();
+    let mut scores = DamageScores::default();
+    for view in views {
+        rasterizer.forward(splats, &view.camera, &settings, &mut out);
+        let predicted = predicted_masks(&out, readout);
+        scores.add_view(&predicted, &view.reference);
+    }
+    scores
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn mask(bits: &[u8]) -> Mask {
+        Mask {
+            width: bits.len() as u32,
+            height: 1,
+            data: bits.to_vec(),
+        }
+    }
+
+    #[test]
+    fn scores_count_only_classes_with_a_reference() {
+        let mut scores = DamageScores::default();
+        let predicted = [
+            mask(&[1, 1, 0, 0]),
+            mask(&[0, 0, 0, 1]),
+            mask(&[1, 1, 1, 1]),
+        ];
+        let reference = [Some(mask(&[1, 0, 1, 0])), Some(mask(&[0, 0, 0, 1])), None];
+        scores.add_view(&predicted, &reference);
+        let iou = scores.per_class(MaskAgreement::iou);
+        assert_eq!(iou.len(), 2);
+        assert!((iou["crack"] - 1.0 / 3.0).abs() < 1e-12);
+        assert_eq!(iou["spalling"], 1.0);
+        assert!((scores.per_class(MaskAgreement::precision)["crack"] - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn label_channels_are_read_at_one_half() {
+        let out = RenderOutput {
+            width: 2,
+            height: 1,
+            label_channels: 3,
+            labels: vec![0.6, 0.2, 0.0, 0.4, 0.9, 0.51],
+            ..RenderOutput::default()
+        };
+        let readout = DamageReadout {
+            mode: TrainMode::Label,
+            palette: Palette::default(),
+            tolerance: 40.0,
+        };
+        let masks = predicted_masks(&out, &readout);
+        assert_eq!(masks[0].data, vec![1, 0]);
+        assert_eq!(masks[1].data, vec![0, 1]);
+        assert_eq!(masks[2].data, vec![0, 1]);
+    }
+}

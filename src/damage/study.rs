@@ -1,0 +1,326 @@
+//! The mask-noise study: how much segmentation error the twin removes. At each corruption rate a
+//! fraction of the training views get blobs added to and cut out of their (clean) masks, as
+//! `synth --mask-noise` does; the twin is trained on them in each mode and its rendered masks are
+//! compared with the clean ones, on the training views (does multi-view consistency outvote the
+//! errors?) and on held-out views (does the twin generalise?).
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::damage::evaluate::{DamageReadout, DamageScores, ReferenceView, evaluate_damage};
+use crate::damage::overlay::OVERLAY_TOLERANCE;
+use crate::damage::reference::{ReferenceSource, load_reference_views, reference_source};
+use crate::damage::setup::{RunConfig, apply_mode, model_and_spec};
+use crate::damage::{DamageClass, TrainMode};
+use crate::metrics::MaskAgreement;
+use crate::scene::masks::resize_mask_nearest;
+use crate::scene::{Dataset, Mask};
+use crate::synth::corrupt::{corrupt_class_mask, noisy_views};
+use crate::train::job::{JobEvent, JobOptions, TrainJob, TrainSetup};
+use crate::train::spec::TrainView;
+use crate::train::views::{load_views, split_views};
+
+/// The study's settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StudyConfig {
+    /// Fractions of training views whose masks are corrupted.
+    pub rates: Vec<f32>,
+    pub modes: Vec<TrainMode>,
+    /// The run at every rate and mode (its `mode` is replaced by each of `modes`).
+    pub run: RunConfig,
+    /// Seed of the corruption (which views, which blobs).
+    pub noise_seed: u64,
+    pub threads: Option<usize>,
+}
+
+/// One (mode, rate, class) result.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StudyRow {
+    pub mode: TrainMode,
+    pub rate: f32,
+    pub class: DamageClass,
+    /// IoU of the corrupted training masks against the clean ones.
+    pub input_iou: f64,
+    /// IoU of the twin's rendered masks against the clean ones, on the training views.
+    pub twin_iou_train: f64,
+    /// The same on held-out views.
+    pub twin_iou_heldout: f64,
+    pub twin_f1_heldout: f64,
+    pub twin_precision_heldout: f64,
+    pub twin_recall_heldout: f64,
+    /// Views whose masks were corrupted, of the training views.
+    pub noisy_views: usize,
+    pub train_seconds: f64,
+    pub gaussians: usize,
+    pub heldout_psnr: Option<f64>,
+}
+
+/// Progress of the study, for a progress bar.
+#[derive(Clone, Debug)]
+pub enum StudyEvent {
+    RunStarted {
+        run: usize,
+        runs: usize,
+        mode: TrainMode,
+        rate: f32,
+    },
+    Step {
+        run: usize,
+        step: u32,
+        total: u32,
+    },
+    RunFinished {
+        run: usize,
+        rows: Vec<StudyRow>,
+    },
+}
+
+/// Clean masks of the training views and what is needed to corrupt them.
+struct CleanTraining {
+    views: Vec<TrainView>,
+    /// Per view, where added blobs may be centred (not sky), when the dataset says.
+    building: Vec<Vec<bool>>,
+    reference: Vec<ReferenceView>,
+}
+
+/// Runs the study on `dataset` (which must have masks; a synthetic survey's `truth/` is used as
+/// the clean reference when present).
+pub fn run_study(
+    dataset: &Dataset,
+    config: &StudyConfig,
+    on_event: &mut dyn FnMut(StudyEvent),
+) -> Result<Vec<StudyRow>, String> {
+    let source = reference_source(dataset).ok_or_else(|| {
+        format!(
+            "{} has no damage masks (masks/ or truth/masks/) to corrupt",
+            dataset.root.display()
+        )
+    })?;
+    let (train_indices, heldout_indices) = split_views(dataset, &config.run.holdout)?;
+    let clean = load_clean_training(dataset, &source, &train_indices, config)?;
+    let heldout = load_reference_views(dataset, &source, &heldout_indices, config.run.scale)
+        .map_err(|e| e.to_string())?;
+
+    let runs = config.rates.len() * config.modes.len();
+    let mut rows = Vec::new();
+    let mut run = 0;
+    for &rate in &config.rates {
+        let (noisy, corrupted) = corrupt(&clean, rate, config.noise_seed);
+        let input = agreement(&corrupted, &clean.reference);
+        for &mode in &config.modes {
+            on_event(StudyEvent::RunStarted {
+                run,
+                runs,
+                mode,
+                rate,
+            });
+            let started = Instant::now();
+            let mut views = clean.views.clone();
+            for (view, masks) in views.iter_mut().zip(&corrupted) {
+                view.labels = masks.clone();
+            }
+            apply_mode(&mut views, mode, &config.run.palette);
+            let run_config = RunConfig {
+                mode,
+                ..config.run.clone()
+            };
+            let (splats, spec) = model_and_spec(dataset, &views, &run_config, mode)?;
+            let job = TrainJob::spawn(
+                TrainSetup {
+                    spec,
+                    splats,
+                    views,
+                    heldout: Vec::new(),
+                },
+                JobOptions {
+                    threads: config.threads,
+                    snapshot_interval: None,
+                },
+            );
+            let mut outcome = None;
+            for event in job.events().iter() {
+                match event {
+                    JobEvent::Progress(p) if p.step % 50 == 0 || p.step == p.total => {
+                        on_event(StudyEvent::Step {
+                            run,
+                            step: p.step,
+                            total: p.total,
+                        })
+                    }
+                    JobEvent::Finished(o) => outcome = Some(Ok(o)),
+                    JobEvent::Failed(e) => outcome = Some(Err(e)),
+                    _ => {}
+                }
+            }
+            let outcome = outcome
+                .unwrap_or_else(|| Err("the training job ended without a result".into()))
+                .map_err(|e| format!("{mode} mode at rate {rate}: {e}"))?;
+            let readout = DamageReadout {
+                mode,
+                tolerance: OVERLAY_TOLERANCE,
+                palette: config.run.palette,
+            };
+            let background = config.run.background;
+            let train_scores =
+                evaluate_damage(&outcome.splats, &clean.reference, &readout, background);
+            let heldout_scores = evaluate_damage(&outcome.splats, &heldout, &readout, background);
+            let psnr = heldout_psnr(dataset, &heldout_indices, &run_config, &outcome.splats);
+            let run_rows = rows_for(
+                mode,
+                rate,
+                &input,
+                &train_scores,
+                &heldout_scores,
+                noisy,
+                started.elapsed().as_secs_f64(),
+                outcome.splats.len(),
+                psnr,
+            );
+            on_event(StudyEvent::RunFinished {
+                run,
+                rows: run_rows.clone(),
+            });
+            rows.extend(run_rows);
+            run += 1;
+        }
+    }
+    Ok(rows)
+}
+
+fn load_clean_training(
+    dataset: &Dataset,
+    source: &ReferenceSource,
+    indices: &[usize],
+    config: &StudyConfig,
+) -> Result<CleanTraining, String> {
+    let scale = config.run.scale;
+    let mut views = load_views(dataset, indices, scale, false).map_err(|e| e.to_string())?;
+    let reference =
+        load_reference_views(dataset, source, indices, scale).map_err(|e| e.to_string())?;
+    let mut building = Vec::with_capacity(views.len());
+    for (view, reference) in views.iter_mut().zip(&reference) {
+        let (w, h) = (view.image.width, view.image.height);
+        view.labels = reference
+            .reference
+            .iter()
+            .map(|m| m.clone().unwrap_or_else(|| Mask::empty(w, h)))
+            .collect();
+        building.push(structure_pixels(dataset, &view.name, w, h));
+    }
+    Ok(CleanTraining {
+        views,
+        building,
+        reference,
+    })
+}
+
+/// Pixels showing the structure (not sky), from a synthetic survey's component labels
+/// (`truth/components/<view>.png`, sky = 0); every pixel when there are none.
+fn structure_pixels(dataset: &Dataset, name: &str, width: u32, height: u32) -> Vec<bool> {
+    let path = dataset
+        .root
+        .join("truth/components")
+        .join(format!("{name}.png"));
+    let all = || vec![true; width as usize * height as usize];
+    let Ok(image) = image::open(&path) else {
+        return all();
+    };
+    let grey = image.to_luma8();
+    let ids = Mask {
+        width: grey.width(),
+        height: grey.height(),
+        data: grey.into_raw(),
+    };
+    resize_mask_nearest(&ids, width, height)
+        .data
+        .iter()
+        .map(|&id| id != 0)
+        .collect()
+}
+
+/// The training masks at `rate`: which views are noisy, and per view per class the masks.
+fn corrupt(clean: &CleanTraining, rate: f32, seed: u64) -> (usize, Vec<Vec<Mask>>) {
+    let noisy = noisy_views(clean.views.len(), rate, seed);
+    let mut rng = fastrand::Rng::with_seed(seed ^ 0x5EED_0FB1_0B00);
+    let masks = clean
+        .views
+        .iter()
+        .zip(&noisy)
+        .zip(&clean.building)
+        .map(|((view, &is_noisy), building)| {
+            let mut masks = view.labels.clone();
+            if is_noisy {
+                for (class, mask) in DamageClass::ALL.iter().zip(masks.iter_mut()) {
+                    let (w, h) = (mask.width as usize, mask.height as usize);
+                    corrupt_class_mask(*class, &mut mask.data, w, h, building, &mut rng);
+                }
+            }
+            masks
+        })
+        .collect();
+    (noisy.iter().filter(|&&n| n).count(), masks)
+}
+
+/// Agreement of the corrupted training masks with the clean ones, per class.
+fn agreement(corrupted: &[Vec<Mask>], clean: &[ReferenceView]) -> DamageScores {
+    let mut scores = DamageScores::default();
+    for (masks, reference) in corrupted.iter().zip(clean) {
+        scores.add_view(masks, &reference.reference);
+    }
+    scores
+}
+
+fn heldout_psnr(
+    dataset: &Dataset,
+    indices: &[usize],
+    config: &RunConfig,
+    splats: &crate::splats::Splats,
+) -> Option<f64> {
+    let mut views = load_views(dataset, indices, config.scale, true).ok()?;
+    apply_mode(&mut views, config.mode, &config.palette);
+    crate::train::trainer::evaluate_views(splats, &views, config.background, splats.sh_degree)
+        .map(|s| s.psnr)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn rows_for(
+    mode: TrainMode,
+    rate: f32,
+    input: &DamageScores,
+    train: &DamageScores,
+    heldout: &DamageScores,
+    noisy_views: usize,
+    train_seconds: f64,
+    gaussians: usize,
+    heldout_psnr: Option<f64>,
+) -> Vec<StudyRow> {
+    let figure = |scores: &DamageScores, class: DamageClass, f: fn(&MaskAgreement) -> f64| {
+        scores.classes.get(&class).map_or(f64::NAN, f)
+    };
+    DamageClass::ALL
+        .iter()
+        .filter(|c| {
+            // Only classes there is something to find in: an absent class scores a vacuous 1.
+            input
+                .classes
+                .get(c)
+                .is_some_and(|a| a.true_positive + a.false_negative > 0)
+        })
+        .map(|&class| StudyRow {
+            mode,
+            rate,
+            class,
+            input_iou: figure(input, class, MaskAgreement::iou),
+            twin_iou_train: figure(train, class, MaskAgreement::iou),
+            twin_iou_heldout: figure(heldout, class, MaskAgreement::iou),
+            twin_f1_heldout: figure(heldout, class, MaskAgreement::f1),
+            twin_precision_heldout: figure(heldout, class, MaskAgreement::precision),
+            twin_recall_heldout: figure(heldout, class, MaskAgreement::recall),
+            noisy_views,
+            train_seconds,
+            gaussians,
+            heldout_psnr,
+        })
+        .collect()
+}
