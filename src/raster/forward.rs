@@ -71,37 +71,55 @@ pub(crate) fn footprint(p: &Projected, g: usize, ox: f32, oy: f32) -> [usize; 4]
     ]
 }
 
-/// Columns `[x0, x1)` of a tile row (at `dy = mean.y - py`) whose pixel centres can reach the
-/// alpha threshold: the chord of the ellipse `power <= ln(opacity / threshold)`, padded, and
-/// clipped to the footprint. Pixels outside it would be skipped by the blend loop anyway, so
-/// narrowing to it changes no result; it only saves work on the ellipse's rounded ends.
+/// Row segments of a tile (row `y`, half `h`: pixels `8h..8h + 8`) whose pixel centres can
+/// reach the alpha threshold, as bit `2y + h`: per row the chord of the ellipse
+/// `power <= ln(opacity / threshold)`, padded, clipped to the footprint `[x0, y0, x1, y1]`.
+/// Pixels outside it would be skipped by the blend loop anyway, so visiting only these changes
+/// no result; it saves the work on the ellipse's rounded ends. All 16 rows at once so the
+/// square roots and divisions vectorise instead of running one dependent chain per row.
 #[inline(always)]
-pub(crate) fn row_span(
+pub(crate) fn segment_mask(
     sp: &Splat2d,
     power_max: f32,
-    dy: f32,
+    [x0, y0, x1, y1]: [usize; 4],
     ox: f32,
-    x0: usize,
-    x1: usize,
-) -> (usize, usize) {
-    if !power_max.is_finite() {
-        return (x0, x1);
+    oy: f32,
+) -> u32 {
+    if x0 >= x1 || y0 >= y1 {
+        return 0;
     }
-    // 0.5 (a dx² + c dy²) + b dx dy <= P  <=>  a dx² + 2 b dy dx + c dy² - 2 P <= 0.
-    let disc = sp.b * sp.b * dy * dy - sp.a * (sp.c * dy * dy - 2.0 * power_max);
-    if !(disc >= 0.0) {
-        return (0, 0);
-    }
-    let root = disc.sqrt();
-    let dx_lo = (-sp.b * dy - root) / sp.a;
-    let dx_hi = (-sp.b * dy + root) / sp.a;
-    // Pixel centre ox + x + 0.5 = mean.x - dx.
     let ts = TS as f32;
-    let lo = (sp.mx - dx_hi - 0.5 - ox - 0.05).ceil().max(0.0).min(ts) as usize;
-    let hi = ((sp.mx - dx_lo - 0.5 - ox + 0.05).floor() + 1.0)
-        .max(0.0)
-        .min(ts) as usize;
-    (lo.max(x0), hi.min(x1))
+    let (fx0, fx1) = (x0 as f32, x1 as f32);
+    let mut lo = [fx0; TS];
+    let mut hi = [fx1; TS];
+    if power_max.is_finite() {
+        for y in 0..TS {
+            let dy = sp.my - (oy + y as f32 + 0.5);
+            // 0.5 (a dx² + c dy²) + b dx dy <= P  <=>  a dx² + 2 b dy dx + c dy² - 2 P <= 0.
+            let disc = sp.b * sp.b * dy * dy - sp.a * (sp.c * dy * dy - 2.0 * power_max);
+            let root = disc.max(0.0).sqrt();
+            let dx_lo = (-sp.b * dy - root) / sp.a;
+            let dx_hi = (-sp.b * dy + root) / sp.a;
+            // Pixel centre ox + x + 0.5 = mean.x - dx.
+            let l = (sp.mx - dx_hi - 0.5 - ox - 0.05).ceil().max(0.0).min(ts);
+            let h = ((sp.mx - dx_lo - 0.5 - ox + 0.05).floor() + 1.0)
+                .max(0.0)
+                .min(ts);
+            // `!(disc >= 0)` also empties the row when disc is NaN.
+            let empty = !(disc >= 0.0);
+            lo[y] = if empty { ts } else { l.max(fx0) };
+            hi[y] = if empty { 0.0 } else { h.min(fx1) };
+        }
+    }
+    let lanes = LANES as f32;
+    let mut bits = [0u32; TS];
+    for y in 0..TS {
+        let rows = y >= y0 && y < y1 && lo[y] < hi[y];
+        let left = rows && lo[y] < lanes;
+        let right = rows && hi[y] > lanes;
+        bits[y] = ((left as u32) | ((right as u32) << 1)) << (2 * y);
+    }
+    bits.iter().fold(0, |m, &b| m | b)
 }
 
 /// `ln(opacity / threshold)` with a safety margin: the largest power that can still blend;
@@ -152,6 +170,7 @@ pub(crate) fn falloff(
 fn rasterize_tile_impl(
     tile: usize,
     state: &mut [f32],
+    masks: &mut [u32],
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
@@ -176,72 +195,79 @@ fn rasterize_tile_impl(
     let mut alpha = [0.0; LANES];
     let mut ok = [false; LANES];
     let mut w = [0.0f32; LANES];
-    for (n, &g) in bins.gaussian_ids[start as usize..end as usize]
-        .iter()
-        .enumerate()
-    {
-        let g = g as usize;
+    let ids = &bins.gaussian_ids[start as usize..end as usize];
+    let mut n = 0;
+    while n < ids.len() {
         if n % 32 == 31 && !live.iter().any(|&l| l) {
             break;
         }
+        let g = ids[n] as usize;
         let sp = Splat2d::load(projected, g);
-        let [x0, y0, x1, y1] = footprint(projected, g, ox, oy);
         let label_values = &projected.labels[g * labels..(g + 1) * labels];
         let power_max = power_limit(sp.opacity, alpha_threshold);
-        for y in y0..y1 {
+        let mut todo = segment_mask(&sp, power_max, footprint(projected, g, ox, oy), ox, oy);
+        // The segments where some lane blended or stopped: the only ones the backward replays.
+        let mut used = 0u32;
+        while todo != 0 {
+            let s = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let (y, half) = (s / 2, (s % 2) * LANES);
+            let base = y * TS + half;
+            let live_seg: &mut [bool; LANES] =
+                (&mut live[base..base + LANES]).try_into().expect("8 lanes");
+            if !live_seg.iter().any(|&l| l) {
+                continue;
+            }
             let dy = sp.my - (oy + y as f32 + 0.5);
-            let (x0, x1) = row_span(&sp, power_max, dy, ox, x0, x1);
-            for half in [0, LANES] {
-                if x1 <= half || x0 >= half + LANES {
-                    continue;
-                }
-                let base = y * TS + half;
-                let live_seg: &mut [bool; LANES] =
-                    (&mut live[base..base + LANES]).try_into().expect("8 lanes");
-                if !live_seg.iter().any(|&l| l) {
-                    continue;
-                }
-                falloff(
-                    &sp,
-                    ox + half as f32 + 0.5,
-                    dy,
-                    alpha_max,
-                    alpha_threshold,
-                    &mut dx,
-                    &mut vis,
-                    &mut raw,
-                    &mut alpha,
-                    &mut ok,
-                );
-                let t_seg: &mut [f32; LANES] = (&mut t_buf[base..base + LANES])
-                    .try_into()
-                    .expect("8 lanes");
+            falloff(
+                &sp,
+                ox + half as f32 + 0.5,
+                dy,
+                alpha_max,
+                alpha_threshold,
+                &mut dx,
+                &mut vis,
+                &mut raw,
+                &mut alpha,
+                &mut ok,
+            );
+            let t_seg: &mut [f32; LANES] = (&mut t_buf[base..base + LANES])
+                .try_into()
+                .expect("8 lanes");
+            let mut any_valid = false;
+            for l in 0..LANES {
+                let valid = live_seg[l] & ok[l];
+                any_valid |= valid;
+                let next_t = t_seg[l] * (1.0 - alpha[l]);
+                // gsplat: `if (next_T <= 1e-4) { done = true; break; }` (exclusive).
+                let stop = valid & (next_t <= TRANSMITTANCE_MIN);
+                let contrib = valid & !stop;
+                live_seg[l] &= !stop;
+                w[l] = if contrib { alpha[l] * t_seg[l] } else { 0.0 };
+                t_seg[l] = if contrib { next_t } else { t_seg[l] };
+            }
+            if !any_valid {
+                continue;
+            }
+            used |= 1 << s;
+            for l in 0..LANES {
+                r_buf[base + l] += w[l] * sp.color.x;
+                g_buf[base + l] += w[l] * sp.color.y;
+                b_buf[base + l] += w[l] * sp.color.z;
+                depth_buf[base + l] += w[l] * sp.depth;
+            }
+            for (k, &p) in label_values.iter().enumerate() {
+                let seg = &mut label_buf[k * TILE_PIXELS + base..k * TILE_PIXELS + base + LANES];
                 for l in 0..LANES {
-                    let valid = live_seg[l] & ok[l];
-                    let next_t = t_seg[l] * (1.0 - alpha[l]);
-                    // gsplat: `if (next_T <= 1e-4) { done = true; break; }` (exclusive).
-                    let stop = valid & (next_t <= TRANSMITTANCE_MIN);
-                    let contrib = valid & !stop;
-                    live_seg[l] &= !stop;
-                    w[l] = if contrib { alpha[l] * t_seg[l] } else { 0.0 };
-                    t_seg[l] = if contrib { next_t } else { t_seg[l] };
-                }
-                for l in 0..LANES {
-                    r_buf[base + l] += w[l] * sp.color.x;
-                    g_buf[base + l] += w[l] * sp.color.y;
-                    b_buf[base + l] += w[l] * sp.color.z;
-                    depth_buf[base + l] += w[l] * sp.depth;
-                }
-                for (k, &p) in label_values.iter().enumerate() {
-                    let seg =
-                        &mut label_buf[k * TILE_PIXELS + base..k * TILE_PIXELS + base + LANES];
-                    for l in 0..LANES {
-                        seg[l] += w[l] * p;
-                    }
+                    seg[l] += w[l] * p;
                 }
             }
         }
+        masks[n] = used;
+        n += 1;
     }
+    // Gaussians behind a finished tile: nothing to replay.
+    masks[n..].fill(0);
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -249,6 +275,7 @@ fn rasterize_tile_impl(
 fn rasterize_tile_avx2(
     tile: usize,
     state: &mut [f32],
+    masks: &mut [u32],
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
@@ -258,6 +285,7 @@ fn rasterize_tile_avx2(
     rasterize_tile_impl(
         tile,
         state,
+        masks,
         projected,
         bins,
         labels,
@@ -269,6 +297,7 @@ fn rasterize_tile_avx2(
 fn rasterize_tile(
     tile: usize,
     state: &mut [f32],
+    masks: &mut [u32],
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
@@ -282,6 +311,7 @@ fn rasterize_tile(
             rasterize_tile_avx2(
                 tile,
                 state,
+                masks,
                 projected,
                 bins,
                 labels,
@@ -294,6 +324,7 @@ fn rasterize_tile(
     rasterize_tile_impl(
         tile,
         state,
+        masks,
         projected,
         bins,
         labels,
@@ -302,24 +333,31 @@ fn rasterize_tile(
     )
 }
 
-/// Blends every tile (rayon over tiles) into the tile-major `state`.
+/// Blends every tile (rayon over tiles) into the tile-major `state`, and writes per
+/// intersection the mask of row segments it blended into (`segment_mask` bits) to `masks`.
 pub(crate) fn rasterize(
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
     settings: &RenderSettings,
     state: &mut Vec<f32>,
+    masks: &mut Vec<u32>,
 ) {
     let stride = state_channels(labels) * TILE_PIXELS;
     state.clear();
     state.resize(bins.tile_count() * stride, 0.0);
+    masks.clear();
+    masks.resize(bins.gaussian_ids.len(), 0);
+    let mask_slices = bins.split_by_tile(masks, 1);
     state
         .par_chunks_mut(stride)
+        .zip(mask_slices)
         .enumerate()
-        .for_each(|(tile, st)| {
+        .for_each(|(tile, (st, m))| {
             rasterize_tile(
                 tile,
                 st,
+                m,
                 projected,
                 bins,
                 labels,

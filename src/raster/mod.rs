@@ -241,6 +241,8 @@ pub struct Rasterizer {
     bins: bin::TileBins,
     /// Tile-major blending state of the last forward: per tile `channels(L) * 256` floats.
     tile_state: Vec<f32>,
+    /// Per intersection of the last forward, the row segments it blended into.
+    segment_masks: Vec<u32>,
     /// Per-intersection screen gradients of the last backward.
     isect_grads: Vec<f32>,
     /// Per-Gaussian screen gradients, `raster_backward::grad_stride(L)` floats each.
@@ -286,6 +288,7 @@ impl Rasterizer {
             labels,
             settings,
             &mut self.tile_state,
+            &mut self.segment_masks,
         );
         forward::write_output(
             &self.tile_state,
@@ -368,6 +371,7 @@ impl Rasterizer {
             &self.projected,
             &self.bins,
             &self.tile_state,
+            &self.segment_masks,
             self.label_channels,
             settings,
             v_out,

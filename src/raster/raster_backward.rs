@@ -6,10 +6,7 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::bin::TileBins;
-use super::forward::{
-    CH_DEPTH, CH_LABELS, CH_RGB, CH_T, LANES, Splat2d, falloff, footprint, power_limit, row_span,
-    state_channels,
-};
+use super::forward::{CH_DEPTH, CH_LABELS, CH_RGB, CH_T, LANES, Splat2d, falloff, state_channels};
 use super::{
     MAX_LABEL_CHANNELS, PixelGrads, Projected, RenderSettings, ScreenGrads, TILE_PIXELS, TILE_SIZE,
     TRANSMITTANCE_MIN,
@@ -96,6 +93,7 @@ fn gather_inputs(
 fn backward_tile_impl(
     tile: usize,
     out: &mut [f32],
+    masks: &[u32],
     projected: &Projected,
     bins: &TileBins,
     inputs: &TileInputs,
@@ -117,14 +115,15 @@ fn backward_tile_impl(
     let mut ok = [false; LANES];
     let mut w = [0.0f32; LANES];
     let mut cg = [0.0f32; LANES];
-    for (n, &g) in bins.gaussian_ids[start as usize..end as usize]
-        .iter()
-        .enumerate()
-    {
+    let ids = &bins.gaussian_ids[start as usize..end as usize];
+    for (n, (&g, &mask)) in ids.iter().zip(masks).enumerate() {
+        if mask == 0 {
+            // Blended nowhere in the forward: its gradient slots stay zero.
+            continue;
+        }
         let g = g as usize;
         let isect_out = &mut out[n * stride..(n + 1) * stride];
         let sp = Splat2d::load(projected, g);
-        let [x0, y0, x1, y1] = footprint(projected, g, ox, oy);
         let label_values = &projected.labels[g * labels..(g + 1) * labels];
         let mut s_dx = [0.0f32; LANES];
         let mut s_dy = [0.0f32; LANES];
@@ -134,20 +133,18 @@ fn backward_tile_impl(
         let mut s_op = [0.0f32; LANES];
         let mut s_chan = [[0.0f32; LANES]; 4];
         let mut s_lab = [[0.0f32; LANES]; MAX_LABEL_CHANNELS];
-        let power_max = power_limit(sp.opacity, alpha_threshold);
-        for y in y0..y1 {
+        // Only the segments where the forward blended or stopped a pixel: every other one
+        // would leave the replayed state and these sums unchanged.
+        let mut todo = mask;
+        while todo != 0 {
+            let s = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let (y, half) = (s / 2, (s % 2) * LANES);
             let dy = sp.my - (oy + y as f32 + 0.5);
-            let (x0, x1) = row_span(&sp, power_max, dy, ox, x0, x1);
-            for half in [0, LANES] {
-                if x1 <= half || x0 >= half + LANES {
-                    continue;
-                }
+            {
                 let base = y * TS + half;
                 let live_seg: &mut [bool; LANES] =
                     (&mut live[base..base + LANES]).try_into().expect("8 lanes");
-                if !live_seg.iter().any(|&l| l) {
-                    continue;
-                }
                 falloff(
                     &sp,
                     ox + half as f32 + 0.5,
@@ -256,6 +253,7 @@ fn backward_tile_impl(
 fn backward_tile_avx2(
     tile: usize,
     out: &mut [f32],
+    masks: &[u32],
     projected: &Projected,
     bins: &TileBins,
     inputs: &TileInputs,
@@ -266,6 +264,7 @@ fn backward_tile_avx2(
     backward_tile_impl(
         tile,
         out,
+        masks,
         projected,
         bins,
         inputs,
@@ -279,6 +278,7 @@ fn backward_tile_avx2(
 fn backward_tile(
     tile: usize,
     out: &mut [f32],
+    masks: &[u32],
     projected: &Projected,
     bins: &TileBins,
     inputs: &TileInputs,
@@ -293,6 +293,7 @@ fn backward_tile(
             backward_tile_avx2(
                 tile,
                 out,
+                masks,
                 projected,
                 bins,
                 inputs,
@@ -306,6 +307,7 @@ fn backward_tile(
     backward_tile_impl(
         tile,
         out,
+        masks,
         projected,
         bins,
         inputs,
@@ -322,6 +324,7 @@ pub(crate) fn rasterize_backward(
     projected: &Projected,
     bins: &TileBins,
     state: &[f32],
+    masks: &[u32],
     labels: usize,
     settings: &RenderSettings,
     v_out: &PixelGrads,
@@ -334,14 +337,7 @@ pub(crate) fn rasterize_backward(
     let n_isects = bins.gaussian_ids.len();
     isect_grads.clear();
     isect_grads.resize(n_isects * stride, 0.0);
-    // One slice per tile (a few hundred pointers per frame); the ranges are disjoint.
-    let mut slices: Vec<&mut [f32]> = Vec::with_capacity(bins.tile_ranges.len());
-    let mut rest: &mut [f32] = isect_grads;
-    for [start, end] in &bins.tile_ranges {
-        let (head, tail) = rest.split_at_mut((end - start) as usize * stride);
-        slices.push(head);
-        rest = tail;
-    }
+    let slices = bins.split_by_tile(isect_grads, stride);
     let state_stride = state_channels(labels) * TILE_PIXELS;
     let (w, h) = (width as usize, height as usize);
     slices.into_par_iter().enumerate().for_each(|(tile, out)| {
@@ -371,6 +367,7 @@ pub(crate) fn rasterize_backward(
         backward_tile(
             tile,
             out,
+            &masks[start as usize..end as usize],
             projected,
             bins,
             &inputs,

@@ -69,18 +69,18 @@ fn settings() -> RenderSettings {
     }
 }
 
-fn render(p: &Projected) -> (RenderOutput, TileBins, Vec<f32>) {
+fn render(p: &Projected) -> (RenderOutput, TileBins, Vec<f32>, Vec<u32>) {
     let mut bins = TileBins::default();
     bins.build(p, W, H);
-    let mut state = Vec::new();
-    rasterize(p, &bins, L, &settings(), &mut state);
+    let (mut state, mut masks) = (Vec::new(), Vec::new());
+    rasterize(p, &bins, L, &settings(), &mut state, &mut masks);
     let mut out = RenderOutput::default();
     write_output(&state, &bins, L, settings().background, W, H, &mut out);
-    (out, bins, state)
+    (out, bins, state, masks)
 }
 
 fn loss(p: &Projected, w: &Weights) -> f64 {
-    let (out, _, _) = render(p);
+    let (out, _, _, _) = render(p);
     let dot =
         |a: &[f32], b: &[f32]| -> f64 { a.iter().zip(b).map(|(x, y)| *x as f64 * *y as f64).sum() };
     dot(&out.color, &w.color)
@@ -90,7 +90,7 @@ fn loss(p: &Projected, w: &Weights) -> f64 {
 }
 
 fn screen_grads(p: &Projected, w: &Weights) -> ScreenGrads {
-    let (_, bins, state) = render(p);
+    let (_, bins, state, masks) = render(p);
     let v = PixelGrads {
         color: &w.color,
         alpha: Some(&w.alpha),
@@ -102,6 +102,7 @@ fn screen_grads(p: &Projected, w: &Weights) -> ScreenGrads {
         p,
         &bins,
         &state,
+        &masks,
         L,
         &settings(),
         &v,
