@@ -187,7 +187,8 @@ fn rasterize_tile_impl(
     let (depth_buf, label_buf) = rest.split_at_mut(TILE_PIXELS);
     let (r_buf, gb) = rgb.split_at_mut(TILE_PIXELS);
     let (g_buf, b_buf) = gb.split_at_mut(TILE_PIXELS);
-    let mut live = [true; TILE_PIXELS];
+    // A finished pixel keeps its transmittance negated, so "live" is `t > 0` and the blend loop
+    // works on floats only (a separate bool array costs more in mask conversions than the blend).
     let [start, end] = bins.tile_ranges[tile];
     let mut dx = [0.0; LANES];
     let mut vis = [0.0; LANES];
@@ -198,7 +199,7 @@ fn rasterize_tile_impl(
     let ids = &bins.gaussian_ids[start as usize..end as usize];
     let mut n = 0;
     while n < ids.len() {
-        if n % 32 == 31 && !live.iter().any(|&l| l) {
+        if n % 32 == 31 && !any_live(t_buf) {
             break;
         }
         let g = ids[n] as usize;
@@ -213,9 +214,10 @@ fn rasterize_tile_impl(
             todo &= todo - 1;
             let (y, half) = (s / 2, (s % 2) * LANES);
             let base = y * TS + half;
-            let live_seg: &mut [bool; LANES] =
-                (&mut live[base..base + LANES]).try_into().expect("8 lanes");
-            if !live_seg.iter().any(|&l| l) {
+            let t_seg: &mut [f32; LANES] = (&mut t_buf[base..base + LANES])
+                .try_into()
+                .expect("8 lanes");
+            if !any_live(t_seg) {
                 continue;
             }
             let dy = sp.my - (oy + y as f32 + 0.5);
@@ -231,20 +233,23 @@ fn rasterize_tile_impl(
                 &mut alpha,
                 &mut ok,
             );
-            let t_seg: &mut [f32; LANES] = (&mut t_buf[base..base + LANES])
-                .try_into()
-                .expect("8 lanes");
             let mut any_valid = false;
             for l in 0..LANES {
-                let valid = live_seg[l] & ok[l];
+                let t = t_seg[l];
+                let valid = (t > 0.0) & ok[l];
                 any_valid |= valid;
-                let next_t = t_seg[l] * (1.0 - alpha[l]);
+                let next_t = t * (1.0 - alpha[l]);
                 // gsplat: `if (next_T <= 1e-4) { done = true; break; }` (exclusive).
                 let stop = valid & (next_t <= TRANSMITTANCE_MIN);
                 let contrib = valid & !stop;
-                live_seg[l] &= !stop;
-                w[l] = if contrib { alpha[l] * t_seg[l] } else { 0.0 };
-                t_seg[l] = if contrib { next_t } else { t_seg[l] };
+                w[l] = if contrib { alpha[l] * t } else { 0.0 };
+                t_seg[l] = if contrib {
+                    next_t
+                } else if stop {
+                    -t
+                } else {
+                    t
+                };
             }
             if !any_valid {
                 continue;
@@ -268,6 +273,15 @@ fn rasterize_tile_impl(
     }
     // Gaussians behind a finished tile: nothing to replay.
     masks[n..].fill(0);
+    for t in t_buf.iter_mut() {
+        *t = t.abs();
+    }
+}
+
+/// Whether any pixel of a transmittance slice (finished pixels negated) is still blending.
+#[inline(always)]
+pub(crate) fn any_live(t: &[f32]) -> bool {
+    t.iter().fold(false, |any, &t| any | (t > 0.0))
 }
 
 #[cfg(target_arch = "x86_64")]

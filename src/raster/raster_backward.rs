@@ -108,7 +108,7 @@ fn backward_tile_impl(
     let mut t_buf = [1.0f32; TILE_PIXELS];
     // Running `sum_{j <= i} w_j (c_j · g)` per pixel: the suffix `S_i · g` is total - prefix.
     let mut prefix = [0.0f32; TILE_PIXELS];
-    let mut live = [true; TILE_PIXELS];
+    // Finished pixels keep their transmittance negated, as in the forward.
     let [start, end] = bins.tile_ranges[tile];
     let (mut dx, mut vis, mut raw, mut alpha) =
         ([0.0; LANES], [0.0; LANES], [0.0; LANES], [0.0; LANES]);
@@ -143,8 +143,6 @@ fn backward_tile_impl(
             let dy = sp.my - (oy + y as f32 + 0.5);
             {
                 let base = y * TS + half;
-                let live_seg: &mut [bool; LANES] =
-                    (&mut live[base..base + LANES]).try_into().expect("8 lanes");
                 falloff(
                     &sp,
                     ox + half as f32 + 0.5,
@@ -188,12 +186,11 @@ fn backward_tile_impl(
                     .try_into()
                     .expect("8 lanes");
                 for l in 0..LANES {
-                    let valid = live_seg[l] & ok[l];
                     let t = t_seg[l];
+                    let valid = (t > 0.0) & ok[l];
                     let next_t = t * (1.0 - alpha[l]);
                     let stop = valid & (next_t <= TRANSMITTANCE_MIN);
                     let contrib = valid & !stop;
-                    live_seg[l] &= !stop;
                     let wl = if contrib { alpha[l] * t } else { 0.0 };
                     w[l] = wl;
                     p_seg[l] += wl * cg[l];
@@ -212,7 +209,13 @@ fn backward_tile_impl(
                     s_dxdx[l] += v_sigma * d * d;
                     s_dxdy[l] += v_sigma * d * dy;
                     s_dydy[l] += v_sigma * dy * dy;
-                    t_seg[l] = if contrib { next_t } else { t };
+                    t_seg[l] = if contrib {
+                        next_t
+                    } else if stop {
+                        -t
+                    } else {
+                        t
+                    };
                 }
                 for l in 0..LANES {
                     s_chan[0][l] += w[l] * vr[l];
