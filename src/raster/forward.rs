@@ -7,6 +7,7 @@ use rayon::prelude::*;
 
 use super::bin::TileBins;
 use super::fast_exp::fast_exp;
+use super::segments::SegmentStore;
 use super::{Projected, RenderOutput, RenderSettings, TILE_PIXELS, TILE_SIZE, TRANSMITTANCE_MIN};
 
 /// Pixels evaluated together (one AVX register of f32).
@@ -54,89 +55,10 @@ impl Splat2d {
     }
 }
 
-/// The pixel rows `[y0, y1)` and columns `[x0, x1)` of a tile whose centres lie in a Gaussian's
-/// extent box (`origin` is the tile's top-left pixel).
-#[inline(always)]
-pub(crate) fn footprint(p: &Projected, g: usize, ox: f32, oy: f32) -> [usize; 4] {
-    let m = p.means2d[g];
-    let e = p.extents[g];
-    let ts = TS as f32;
-    let lo = |v: f32| v.ceil().max(0.0).min(ts) as usize;
-    let hi = |v: f32| (v.floor() + 1.0).max(0.0).min(ts) as usize;
-    [
-        lo(m.x - e.x - 0.5 - ox),
-        lo(m.y - e.y - 0.5 - oy),
-        hi(m.x + e.x - 0.5 - ox),
-        hi(m.y + e.y - 0.5 - oy),
-    ]
-}
-
-/// Row segments of a tile (row `y`, half `h`: pixels `8h..8h + 8`) whose pixel centres can
-/// reach the alpha threshold, as bit `2y + h`: per row the chord of the ellipse
-/// `power <= ln(opacity / threshold)`, padded, clipped to the footprint `[x0, y0, x1, y1]`.
-/// Pixels outside it would be skipped by the blend loop anyway, so visiting only these changes
-/// no result; it saves the work on the ellipse's rounded ends. All 16 rows at once so the
-/// square roots and divisions vectorise instead of running one dependent chain per row.
-#[inline(always)]
-pub(crate) fn segment_mask(
-    sp: &Splat2d,
-    power_max: f32,
-    [x0, y0, x1, y1]: [usize; 4],
-    ox: f32,
-    oy: f32,
-) -> u32 {
-    if x0 >= x1 || y0 >= y1 {
-        return 0;
-    }
-    let ts = TS as f32;
-    let (fx0, fx1) = (x0 as f32, x1 as f32);
-    let mut lo = [fx0; TS];
-    let mut hi = [fx1; TS];
-    if power_max.is_finite() {
-        for y in 0..TS {
-            let dy = sp.my - (oy + y as f32 + 0.5);
-            // 0.5 (a dx² + c dy²) + b dx dy <= P  <=>  a dx² + 2 b dy dx + c dy² - 2 P <= 0.
-            let disc = sp.b * sp.b * dy * dy - sp.a * (sp.c * dy * dy - 2.0 * power_max);
-            let root = disc.max(0.0).sqrt();
-            let dx_lo = (-sp.b * dy - root) / sp.a;
-            let dx_hi = (-sp.b * dy + root) / sp.a;
-            // Pixel centre ox + x + 0.5 = mean.x - dx.
-            let l = (sp.mx - dx_hi - 0.5 - ox - 0.05).ceil().max(0.0).min(ts);
-            let h = ((sp.mx - dx_lo - 0.5 - ox + 0.05).floor() + 1.0)
-                .max(0.0)
-                .min(ts);
-            // `!(disc >= 0)` also empties the row when disc is NaN.
-            let empty = !(disc >= 0.0);
-            lo[y] = if empty { ts } else { l.max(fx0) };
-            hi[y] = if empty { 0.0 } else { h.min(fx1) };
-        }
-    }
-    let lanes = LANES as f32;
-    let mut bits = [0u32; TS];
-    for y in 0..TS {
-        let rows = y >= y0 && y < y1 && lo[y] < hi[y];
-        let left = rows && lo[y] < lanes;
-        let right = rows && hi[y] > lanes;
-        bits[y] = ((left as u32) | ((right as u32) << 1)) << (2 * y);
-    }
-    bits.iter().fold(0, |m, &b| m | b)
-}
-
-/// `ln(opacity / threshold)` with a safety margin: the largest power that can still blend;
-/// infinite when there is no threshold.
-#[inline(always)]
-pub(crate) fn power_limit(opacity: f32, alpha_threshold: f32) -> f32 {
-    if alpha_threshold > 0.0 {
-        (opacity / alpha_threshold).ln() * 1.001 + 0.01
-    } else {
-        f32::INFINITY
-    }
-}
-
 /// Per lane of a row segment starting at pixel-centre x `x0`: the offset `dx = mean.x - px`,
 /// `exp(-power)`, the unclamped and clamped alpha, and whether the pixel passes gsplat's
-/// `sigma < 0 || alpha < 1/255` skip. Forward and backward call this same code, so they take
-/// identical decisions bit for bit.
+/// `sigma < 0 || alpha < 1/255` skip. The backward replays what the forward stored of it
+/// ([`replay_falloff`]), so both take identical decisions bit for bit.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn falloff(
@@ -165,12 +87,41 @@ pub(crate) fn falloff(
     }
 }
 
+/// [`falloff`] replayed from the values the forward stored for a segment: `exp(-power)` where
+/// the pixel passed the skip test, -1 where it did not. The same bits as `falloff` without a
+/// second exponential (the backward's longest dependency chain).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn replay_falloff(
+    sp: &Splat2d,
+    x0: f32,
+    stored: &[f32; LANES],
+    alpha_max: f32,
+    dx: &mut [f32; LANES],
+    vis: &mut [f32; LANES],
+    raw_alpha: &mut [f32; LANES],
+    alpha: &mut [f32; LANES],
+    ok: &mut [bool; LANES],
+) {
+    for l in 0..LANES {
+        let e = stored[l];
+        let raw = sp.opacity * e;
+        dx[l] = sp.mx - (x0 + l as f32);
+        vis[l] = e;
+        raw_alpha[l] = raw;
+        alpha[l] = if raw < alpha_max { raw } else { alpha_max };
+        ok[l] = e >= 0.0;
+    }
+}
+
 /// Blends one tile into its planar state slice (`state_channels(L) * 256` floats).
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn rasterize_tile_impl(
     tile: usize,
     state: &mut [f32],
     masks: &mut [u32],
+    seg_vis: &mut [f32],
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
@@ -196,6 +147,7 @@ fn rasterize_tile_impl(
     let mut alpha = [0.0; LANES];
     let mut ok = [false; LANES];
     let mut w = [0.0f32; LANES];
+    let mut vis_pos = 0;
     let ids = &bins.gaussian_ids[start as usize..end as usize];
     let mut n = 0;
     while n < ids.len() {
@@ -205,8 +157,7 @@ fn rasterize_tile_impl(
         let g = ids[n] as usize;
         let sp = Splat2d::load(projected, g);
         let label_values = &projected.labels[g * labels..(g + 1) * labels];
-        let power_max = power_limit(sp.opacity, alpha_threshold);
-        let mut todo = segment_mask(&sp, power_max, footprint(projected, g, ox, oy), ox, oy);
+        let mut todo = masks[n];
         // The segments where some lane blended or stopped: the only ones the backward replays.
         let mut used = 0u32;
         while todo != 0 {
@@ -255,6 +206,13 @@ fn rasterize_tile_impl(
                 continue;
             }
             used |= 1 << s;
+            let stored: &mut [f32; LANES] = (&mut seg_vis[vis_pos..vis_pos + LANES])
+                .try_into()
+                .expect("8 lanes");
+            vis_pos += LANES;
+            for l in 0..LANES {
+                stored[l] = if ok[l] { vis[l] } else { -1.0 };
+            }
             for l in 0..LANES {
                 r_buf[base + l] += w[l] * sp.color.x;
                 g_buf[base + l] += w[l] * sp.color.y;
@@ -286,10 +244,12 @@ pub(crate) fn any_live(t: &[f32]) -> bool {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
 fn rasterize_tile_avx2(
     tile: usize,
     state: &mut [f32],
     masks: &mut [u32],
+    seg_vis: &mut [f32],
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
@@ -300,6 +260,7 @@ fn rasterize_tile_avx2(
         tile,
         state,
         masks,
+        seg_vis,
         projected,
         bins,
         labels,
@@ -308,10 +269,12 @@ fn rasterize_tile_avx2(
     )
 }
 
+#[allow(clippy::too_many_arguments)]
 fn rasterize_tile(
     tile: usize,
     state: &mut [f32],
     masks: &mut [u32],
+    seg_vis: &mut [f32],
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
@@ -326,6 +289,7 @@ fn rasterize_tile(
                 tile,
                 state,
                 masks,
+                seg_vis,
                 projected,
                 bins,
                 labels,
@@ -339,6 +303,7 @@ fn rasterize_tile(
         tile,
         state,
         masks,
+        seg_vis,
         projected,
         bins,
         labels,
@@ -347,31 +312,31 @@ fn rasterize_tile(
     )
 }
 
-/// Blends every tile (rayon over tiles) into the tile-major `state`, and writes per
-/// intersection the mask of row segments it blended into (`segment_mask` bits) to `masks`.
+/// Blends every tile (rayon over tiles) into the tile-major `state`, and leaves in `segments`
+/// what the backward replays: per intersection the row segments it blended into, per tile
+/// their lanes' falloffs for [`replay_falloff`].
 pub(crate) fn rasterize(
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
     settings: &RenderSettings,
     state: &mut Vec<f32>,
-    masks: &mut Vec<u32>,
+    segments: &mut SegmentStore,
 ) {
     let stride = state_channels(labels) * TILE_PIXELS;
     state.clear();
     state.resize(bins.tile_count() * stride, 0.0);
-    masks.clear();
-    masks.resize(bins.gaussian_ids.len(), 0);
-    let mask_slices = bins.split_by_tile(masks, 1);
+    segments.prepare(projected, bins, settings.alpha_threshold);
     state
         .par_chunks_mut(stride)
-        .zip(mask_slices)
+        .zip(segments.tiles_mut(bins))
         .enumerate()
-        .for_each(|(tile, (st, m))| {
+        .for_each(|(tile, (st, (masks, vis)))| {
             rasterize_tile(
                 tile,
                 st,
-                m,
+                masks,
+                vis,
                 projected,
                 bins,
                 labels,

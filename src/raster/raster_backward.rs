@@ -1,12 +1,16 @@
-//! Rasterize backward: per tile, replay the forward blend front to back (same code, same
-//! decisions) and accumulate each intersection's screen-space gradients; then reduce them per
-//! Gaussian serially, so results are identical for any thread count. It must not project.
+//! Rasterize backward: per tile, replay the forward blend front to back (the segments and
+//! falloffs the forward stored, so the same decisions bit for bit) and accumulate each
+//! intersection's screen-space gradients; then reduce them per Gaussian serially, so results
+//! are identical for any thread count. It must not project.
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::bin::TileBins;
-use super::forward::{CH_DEPTH, CH_LABELS, CH_RGB, CH_T, LANES, Splat2d, falloff, state_channels};
+use super::forward::{
+    CH_DEPTH, CH_LABELS, CH_RGB, CH_T, LANES, Splat2d, replay_falloff, state_channels,
+};
+use super::segments::SegmentStore;
 use super::{
     MAX_LABEL_CHANNELS, PixelGrads, Projected, RenderSettings, ScreenGrads, TILE_PIXELS, TILE_SIZE,
     TRANSMITTANCE_MIN,
@@ -94,12 +98,12 @@ fn backward_tile_impl(
     tile: usize,
     out: &mut [f32],
     masks: &[u32],
+    seg_vis: &[f32],
     projected: &Projected,
     bins: &TileBins,
     inputs: &TileInputs,
     labels: usize,
     alpha_max: f32,
-    alpha_threshold: f32,
 ) {
     let stride = grad_stride(labels);
     let tx = tile % bins.tiles_x as usize;
@@ -116,6 +120,7 @@ fn backward_tile_impl(
     let mut w = [0.0f32; LANES];
     let mut cg = [0.0f32; LANES];
     let ids = &bins.gaussian_ids[start as usize..end as usize];
+    let mut vis_pos = 0;
     for (n, (&g, &mask)) in ids.iter().zip(masks).enumerate() {
         if mask == 0 {
             // Blended nowhere in the forward: its gradient slots stay zero.
@@ -143,12 +148,15 @@ fn backward_tile_impl(
             let dy = sp.my - (oy + y as f32 + 0.5);
             {
                 let base = y * TS + half;
-                falloff(
+                let stored: &[f32; LANES] = seg_vis[vis_pos..vis_pos + LANES]
+                    .try_into()
+                    .expect("8 lanes");
+                vis_pos += LANES;
+                replay_falloff(
                     &sp,
                     ox + half as f32 + 0.5,
-                    dy,
+                    stored,
                     alpha_max,
-                    alpha_threshold,
                     &mut dx,
                     &mut vis,
                     &mut raw,
@@ -257,23 +265,15 @@ fn backward_tile_avx2(
     tile: usize,
     out: &mut [f32],
     masks: &[u32],
+    seg_vis: &[f32],
     projected: &Projected,
     bins: &TileBins,
     inputs: &TileInputs,
     labels: usize,
     alpha_max: f32,
-    alpha_threshold: f32,
 ) {
     backward_tile_impl(
-        tile,
-        out,
-        masks,
-        projected,
-        bins,
-        inputs,
-        labels,
-        alpha_max,
-        alpha_threshold,
+        tile, out, masks, seg_vis, projected, bins, inputs, labels, alpha_max,
     )
 }
 
@@ -282,41 +282,25 @@ fn backward_tile(
     tile: usize,
     out: &mut [f32],
     masks: &[u32],
+    seg_vis: &[f32],
     projected: &Projected,
     bins: &TileBins,
     inputs: &TileInputs,
     labels: usize,
     alpha_max: f32,
-    alpha_threshold: f32,
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2 (checked just above).
         unsafe {
             backward_tile_avx2(
-                tile,
-                out,
-                masks,
-                projected,
-                bins,
-                inputs,
-                labels,
-                alpha_max,
-                alpha_threshold,
+                tile, out, masks, seg_vis, projected, bins, inputs, labels, alpha_max,
             )
         };
         return;
     }
     backward_tile_impl(
-        tile,
-        out,
-        masks,
-        projected,
-        bins,
-        inputs,
-        labels,
-        alpha_max,
-        alpha_threshold,
+        tile, out, masks, seg_vis, projected, bins, inputs, labels, alpha_max,
     )
 }
 
@@ -327,7 +311,7 @@ pub(crate) fn rasterize_backward(
     projected: &Projected,
     bins: &TileBins,
     state: &[f32],
-    masks: &[u32],
+    segments: &SegmentStore,
     labels: usize,
     settings: &RenderSettings,
     v_out: &PixelGrads,
@@ -370,13 +354,13 @@ pub(crate) fn rasterize_backward(
         backward_tile(
             tile,
             out,
-            &masks[start as usize..end as usize],
+            &segments.masks[start as usize..end as usize],
+            segments.tile_vis(tile),
             projected,
             bins,
             &inputs,
             labels,
             settings.alpha_max,
-            settings.alpha_threshold,
         );
     });
     let n = projected.radii.len();
