@@ -65,6 +65,19 @@ impl TileBins {
         (self.tiles_x * self.tiles_y) as usize
     }
 
+    /// `per_isect` values per intersection of `data`, split into one slice per tile (a few
+    /// hundred pointers per frame; the ranges are disjoint, so tiles can fill them in parallel).
+    pub fn split_by_tile<'a, T>(&self, data: &'a mut [T], per_isect: usize) -> Vec<&'a mut [T]> {
+        let mut slices = Vec::with_capacity(self.tile_ranges.len());
+        let mut rest = data;
+        for [start, end] in &self.tile_ranges {
+            let (head, tail) = rest.split_at_mut((end - start) as usize * per_isect);
+            slices.push(head);
+            rest = tail;
+        }
+        slices
+    }
+
     pub fn build(&mut self, projected: &Projected, width: u32, height: u32) {
         let (tiles_x, tiles_y) = tile_grid(width, height);
         self.tiles_x = tiles_x;

@@ -7,6 +7,7 @@ use rayon::prelude::*;
 
 use super::bin::TileBins;
 use super::fast_exp::fast_exp;
+use super::segments::SegmentStore;
 use super::{Projected, RenderOutput, RenderSettings, TILE_PIXELS, TILE_SIZE, TRANSMITTANCE_MIN};
 
 /// Pixels evaluated together (one AVX register of f32).
@@ -54,71 +55,10 @@ impl Splat2d {
     }
 }
 
-/// The pixel rows `[y0, y1)` and columns `[x0, x1)` of a tile whose centres lie in a Gaussian's
-/// extent box (`origin` is the tile's top-left pixel).
-#[inline(always)]
-pub(crate) fn footprint(p: &Projected, g: usize, ox: f32, oy: f32) -> [usize; 4] {
-    let m = p.means2d[g];
-    let e = p.extents[g];
-    let ts = TS as f32;
-    let lo = |v: f32| v.ceil().max(0.0).min(ts) as usize;
-    let hi = |v: f32| (v.floor() + 1.0).max(0.0).min(ts) as usize;
-    [
-        lo(m.x - e.x - 0.5 - ox),
-        lo(m.y - e.y - 0.5 - oy),
-        hi(m.x + e.x - 0.5 - ox),
-        hi(m.y + e.y - 0.5 - oy),
-    ]
-}
-
-/// Columns `[x0, x1)` of a tile row (at `dy = mean.y - py`) whose pixel centres can reach the
-/// alpha threshold: the chord of the ellipse `power <= ln(opacity / threshold)`, padded, and
-/// clipped to the footprint. Pixels outside it would be skipped by the blend loop anyway, so
-/// narrowing to it changes no result; it only saves work on the ellipse's rounded ends.
-#[inline(always)]
-pub(crate) fn row_span(
-    sp: &Splat2d,
-    power_max: f32,
-    dy: f32,
-    ox: f32,
-    x0: usize,
-    x1: usize,
-) -> (usize, usize) {
-    if !power_max.is_finite() {
-        return (x0, x1);
-    }
-    // 0.5 (a dx² + c dy²) + b dx dy <= P  <=>  a dx² + 2 b dy dx + c dy² - 2 P <= 0.
-    let disc = sp.b * sp.b * dy * dy - sp.a * (sp.c * dy * dy - 2.0 * power_max);
-    if !(disc >= 0.0) {
-        return (0, 0);
-    }
-    let root = disc.sqrt();
-    let dx_lo = (-sp.b * dy - root) / sp.a;
-    let dx_hi = (-sp.b * dy + root) / sp.a;
-    // Pixel centre ox + x + 0.5 = mean.x - dx.
-    let ts = TS as f32;
-    let lo = (sp.mx - dx_hi - 0.5 - ox - 0.05).ceil().max(0.0).min(ts) as usize;
-    let hi = ((sp.mx - dx_lo - 0.5 - ox + 0.05).floor() + 1.0)
-        .max(0.0)
-        .min(ts) as usize;
-    (lo.max(x0), hi.min(x1))
-}
-
-/// `ln(opacity / threshold)` with a safety margin: the largest power that can still blend;
-/// infinite when there is no threshold.
-#[inline(always)]
-pub(crate) fn power_limit(opacity: f32, alpha_threshold: f32) -> f32 {
-    if alpha_threshold > 0.0 {
-        (opacity / alpha_threshold).ln() * 1.001 + 0.01
-    } else {
-        f32::INFINITY
-    }
-}
-
 /// Per lane of a row segment starting at pixel-centre x `x0`: the offset `dx = mean.x - px`,
 /// `exp(-power)`, the unclamped and clamped alpha, and whether the pixel passes gsplat's
-/// `sigma < 0 || alpha < 1/255` skip. Forward and backward call this same code, so they take
-/// identical decisions bit for bit.
+/// `sigma < 0 || alpha < 1/255` skip. The backward replays what the forward stored of it
+/// ([`replay_falloff`]), so both take identical decisions bit for bit.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn falloff(
@@ -147,11 +87,41 @@ pub(crate) fn falloff(
     }
 }
 
+/// [`falloff`] replayed from the values the forward stored for a segment: `exp(-power)` where
+/// the pixel passed the skip test, -1 where it did not. The same bits as `falloff` without a
+/// second exponential (the backward's longest dependency chain).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn replay_falloff(
+    sp: &Splat2d,
+    x0: f32,
+    stored: &[f32; LANES],
+    alpha_max: f32,
+    dx: &mut [f32; LANES],
+    vis: &mut [f32; LANES],
+    raw_alpha: &mut [f32; LANES],
+    alpha: &mut [f32; LANES],
+    ok: &mut [bool; LANES],
+) {
+    for l in 0..LANES {
+        let e = stored[l];
+        let raw = sp.opacity * e;
+        dx[l] = sp.mx - (x0 + l as f32);
+        vis[l] = e;
+        raw_alpha[l] = raw;
+        alpha[l] = if raw < alpha_max { raw } else { alpha_max };
+        ok[l] = e >= 0.0;
+    }
+}
+
 /// Blends one tile into its planar state slice (`state_channels(L) * 256` floats).
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn rasterize_tile_impl(
     tile: usize,
     state: &mut [f32],
+    masks: &mut [u32],
+    seg_vis: &mut [f32],
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
@@ -168,7 +138,8 @@ fn rasterize_tile_impl(
     let (depth_buf, label_buf) = rest.split_at_mut(TILE_PIXELS);
     let (r_buf, gb) = rgb.split_at_mut(TILE_PIXELS);
     let (g_buf, b_buf) = gb.split_at_mut(TILE_PIXELS);
-    let mut live = [true; TILE_PIXELS];
+    // A finished pixel keeps its transmittance negated, so "live" is `t > 0` and the blend loop
+    // works on floats only (a separate bool array costs more in mask conversions than the blend).
     let [start, end] = bins.tile_ranges[tile];
     let mut dx = [0.0; LANES];
     let mut vis = [0.0; LANES];
@@ -176,79 +147,109 @@ fn rasterize_tile_impl(
     let mut alpha = [0.0; LANES];
     let mut ok = [false; LANES];
     let mut w = [0.0f32; LANES];
-    for (n, &g) in bins.gaussian_ids[start as usize..end as usize]
-        .iter()
-        .enumerate()
-    {
-        let g = g as usize;
-        if n % 32 == 31 && !live.iter().any(|&l| l) {
+    let mut vis_pos = 0;
+    let ids = &bins.gaussian_ids[start as usize..end as usize];
+    let mut n = 0;
+    while n < ids.len() {
+        if n % 32 == 31 && !any_live(t_buf) {
             break;
         }
+        let g = ids[n] as usize;
         let sp = Splat2d::load(projected, g);
-        let [x0, y0, x1, y1] = footprint(projected, g, ox, oy);
         let label_values = &projected.labels[g * labels..(g + 1) * labels];
-        let power_max = power_limit(sp.opacity, alpha_threshold);
-        for y in y0..y1 {
+        let mut todo = masks[n];
+        // The segments where some lane blended or stopped: the only ones the backward replays.
+        let mut used = 0u32;
+        while todo != 0 {
+            let s = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let (y, half) = (s / 2, (s % 2) * LANES);
+            let base = y * TS + half;
+            let t_seg: &mut [f32; LANES] = (&mut t_buf[base..base + LANES])
+                .try_into()
+                .expect("8 lanes");
+            if !any_live(t_seg) {
+                continue;
+            }
             let dy = sp.my - (oy + y as f32 + 0.5);
-            let (x0, x1) = row_span(&sp, power_max, dy, ox, x0, x1);
-            for half in [0, LANES] {
-                if x1 <= half || x0 >= half + LANES {
-                    continue;
-                }
-                let base = y * TS + half;
-                let live_seg: &mut [bool; LANES] =
-                    (&mut live[base..base + LANES]).try_into().expect("8 lanes");
-                if !live_seg.iter().any(|&l| l) {
-                    continue;
-                }
-                falloff(
-                    &sp,
-                    ox + half as f32 + 0.5,
-                    dy,
-                    alpha_max,
-                    alpha_threshold,
-                    &mut dx,
-                    &mut vis,
-                    &mut raw,
-                    &mut alpha,
-                    &mut ok,
-                );
-                let t_seg: &mut [f32; LANES] = (&mut t_buf[base..base + LANES])
-                    .try_into()
-                    .expect("8 lanes");
+            falloff(
+                &sp,
+                ox + half as f32 + 0.5,
+                dy,
+                alpha_max,
+                alpha_threshold,
+                &mut dx,
+                &mut vis,
+                &mut raw,
+                &mut alpha,
+                &mut ok,
+            );
+            let mut any_valid = false;
+            for l in 0..LANES {
+                let t = t_seg[l];
+                let valid = (t > 0.0) & ok[l];
+                any_valid |= valid;
+                let next_t = t * (1.0 - alpha[l]);
+                // gsplat: `if (next_T <= 1e-4) { done = true; break; }` (exclusive).
+                let stop = valid & (next_t <= TRANSMITTANCE_MIN);
+                let contrib = valid & !stop;
+                w[l] = if contrib { alpha[l] * t } else { 0.0 };
+                t_seg[l] = if contrib {
+                    next_t
+                } else if stop {
+                    -t
+                } else {
+                    t
+                };
+            }
+            if !any_valid {
+                continue;
+            }
+            used |= 1 << s;
+            let stored: &mut [f32; LANES] = (&mut seg_vis[vis_pos..vis_pos + LANES])
+                .try_into()
+                .expect("8 lanes");
+            vis_pos += LANES;
+            for l in 0..LANES {
+                stored[l] = if ok[l] { vis[l] } else { -1.0 };
+            }
+            for l in 0..LANES {
+                r_buf[base + l] += w[l] * sp.color.x;
+                g_buf[base + l] += w[l] * sp.color.y;
+                b_buf[base + l] += w[l] * sp.color.z;
+                depth_buf[base + l] += w[l] * sp.depth;
+            }
+            for (k, &p) in label_values.iter().enumerate() {
+                let seg = &mut label_buf[k * TILE_PIXELS + base..k * TILE_PIXELS + base + LANES];
                 for l in 0..LANES {
-                    let valid = live_seg[l] & ok[l];
-                    let next_t = t_seg[l] * (1.0 - alpha[l]);
-                    // gsplat: `if (next_T <= 1e-4) { done = true; break; }` (exclusive).
-                    let stop = valid & (next_t <= TRANSMITTANCE_MIN);
-                    let contrib = valid & !stop;
-                    live_seg[l] &= !stop;
-                    w[l] = if contrib { alpha[l] * t_seg[l] } else { 0.0 };
-                    t_seg[l] = if contrib { next_t } else { t_seg[l] };
-                }
-                for l in 0..LANES {
-                    r_buf[base + l] += w[l] * sp.color.x;
-                    g_buf[base + l] += w[l] * sp.color.y;
-                    b_buf[base + l] += w[l] * sp.color.z;
-                    depth_buf[base + l] += w[l] * sp.depth;
-                }
-                for (k, &p) in label_values.iter().enumerate() {
-                    let seg =
-                        &mut label_buf[k * TILE_PIXELS + base..k * TILE_PIXELS + base + LANES];
-                    for l in 0..LANES {
-                        seg[l] += w[l] * p;
-                    }
+                    seg[l] += w[l] * p;
                 }
             }
         }
+        masks[n] = used;
+        n += 1;
     }
+    // Gaussians behind a finished tile: nothing to replay.
+    masks[n..].fill(0);
+    for t in t_buf.iter_mut() {
+        *t = t.abs();
+    }
+}
+
+/// Whether any pixel of a transmittance slice (finished pixels negated) is still blending.
+#[inline(always)]
+pub(crate) fn any_live(t: &[f32]) -> bool {
+    t.iter().fold(false, |any, &t| any | (t > 0.0))
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
 fn rasterize_tile_avx2(
     tile: usize,
     state: &mut [f32],
+    masks: &mut [u32],
+    seg_vis: &mut [f32],
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
@@ -258,6 +259,8 @@ fn rasterize_tile_avx2(
     rasterize_tile_impl(
         tile,
         state,
+        masks,
+        seg_vis,
         projected,
         bins,
         labels,
@@ -266,9 +269,12 @@ fn rasterize_tile_avx2(
     )
 }
 
+#[allow(clippy::too_many_arguments)]
 fn rasterize_tile(
     tile: usize,
     state: &mut [f32],
+    masks: &mut [u32],
+    seg_vis: &mut [f32],
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
@@ -282,6 +288,8 @@ fn rasterize_tile(
             rasterize_tile_avx2(
                 tile,
                 state,
+                masks,
+                seg_vis,
                 projected,
                 bins,
                 labels,
@@ -294,6 +302,8 @@ fn rasterize_tile(
     rasterize_tile_impl(
         tile,
         state,
+        masks,
+        seg_vis,
         projected,
         bins,
         labels,
@@ -302,24 +312,31 @@ fn rasterize_tile(
     )
 }
 
-/// Blends every tile (rayon over tiles) into the tile-major `state`.
+/// Blends every tile (rayon over tiles) into the tile-major `state`, and leaves in `segments`
+/// what the backward replays: per intersection the row segments it blended into, per tile
+/// their lanes' falloffs for [`replay_falloff`].
 pub(crate) fn rasterize(
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
     settings: &RenderSettings,
     state: &mut Vec<f32>,
+    segments: &mut SegmentStore,
 ) {
     let stride = state_channels(labels) * TILE_PIXELS;
     state.clear();
     state.resize(bins.tile_count() * stride, 0.0);
+    segments.prepare(projected, bins, settings.alpha_threshold);
     state
         .par_chunks_mut(stride)
+        .zip(segments.tiles_mut(bins))
         .enumerate()
-        .for_each(|(tile, st)| {
+        .for_each(|(tile, (st, (masks, vis)))| {
             rasterize_tile(
                 tile,
                 st,
+                masks,
+                vis,
                 projected,
                 bins,
                 labels,

@@ -1,6 +1,7 @@
 //! The CPU reference renderer (classic 3DGS / gsplat maths) and its exact backward pass.
-//! Stages, one per file: project → bin (tile intersection + depth sort) → rasterize forward;
-//! rasterize backward → project backward. It must not know about files, losses or optimisers.
+//! Stages, one per file: project → bin (tile intersection + depth sort) → segments (which row
+//! segments each intersection can touch) → rasterize forward; rasterize backward (replaying what
+//! the forward stored in the segment store) → project backward. It must not know about files, losses or optimisers.
 
 mod bin;
 mod fast_exp;
@@ -8,6 +9,7 @@ mod forward;
 mod project;
 mod project_backward;
 mod raster_backward;
+mod segments;
 #[cfg(test)]
 mod tests;
 
@@ -241,6 +243,8 @@ pub struct Rasterizer {
     bins: bin::TileBins,
     /// Tile-major blending state of the last forward: per tile `channels(L) * 256` floats.
     tile_state: Vec<f32>,
+    /// What the last forward left for the backward to replay.
+    segments: segments::SegmentStore,
     /// Per-intersection screen gradients of the last backward.
     isect_grads: Vec<f32>,
     /// Per-Gaussian screen gradients, `raster_backward::grad_stride(L)` floats each.
@@ -286,6 +290,7 @@ impl Rasterizer {
             labels,
             settings,
             &mut self.tile_state,
+            &mut self.segments,
         );
         forward::write_output(
             &self.tile_state,
@@ -368,6 +373,7 @@ impl Rasterizer {
             &self.projected,
             &self.bins,
             &self.tile_state,
+            &self.segments,
             self.label_channels,
             settings,
             v_out,

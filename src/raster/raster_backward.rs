@@ -1,15 +1,16 @@
-//! Rasterize backward: per tile, replay the forward blend front to back (same code, same
-//! decisions) and accumulate each intersection's screen-space gradients; then reduce them per
-//! Gaussian serially, so results are identical for any thread count. It must not project.
+//! Rasterize backward: per tile, replay the forward blend front to back (the segments and
+//! falloffs the forward stored, so the same decisions bit for bit) and accumulate each
+//! intersection's screen-space gradients; then reduce them per Gaussian serially, so results
+//! are identical for any thread count. It must not project.
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::bin::TileBins;
 use super::forward::{
-    CH_DEPTH, CH_LABELS, CH_RGB, CH_T, LANES, Splat2d, falloff, footprint, power_limit, row_span,
-    state_channels,
+    CH_DEPTH, CH_LABELS, CH_RGB, CH_T, LANES, Splat2d, replay_falloff, state_channels,
 };
+use super::segments::SegmentStore;
 use super::{
     MAX_LABEL_CHANNELS, PixelGrads, Projected, RenderSettings, ScreenGrads, TILE_PIXELS, TILE_SIZE,
     TRANSMITTANCE_MIN,
@@ -96,12 +97,13 @@ fn gather_inputs(
 fn backward_tile_impl(
     tile: usize,
     out: &mut [f32],
+    masks: &[u32],
+    seg_vis: &[f32],
     projected: &Projected,
     bins: &TileBins,
     inputs: &TileInputs,
     labels: usize,
     alpha_max: f32,
-    alpha_threshold: f32,
 ) {
     let stride = grad_stride(labels);
     let tx = tile % bins.tiles_x as usize;
@@ -110,21 +112,23 @@ fn backward_tile_impl(
     let mut t_buf = [1.0f32; TILE_PIXELS];
     // Running `sum_{j <= i} w_j (c_j · g)` per pixel: the suffix `S_i · g` is total - prefix.
     let mut prefix = [0.0f32; TILE_PIXELS];
-    let mut live = [true; TILE_PIXELS];
+    // Finished pixels keep their transmittance negated, as in the forward.
     let [start, end] = bins.tile_ranges[tile];
     let (mut dx, mut vis, mut raw, mut alpha) =
         ([0.0; LANES], [0.0; LANES], [0.0; LANES], [0.0; LANES]);
     let mut ok = [false; LANES];
     let mut w = [0.0f32; LANES];
     let mut cg = [0.0f32; LANES];
-    for (n, &g) in bins.gaussian_ids[start as usize..end as usize]
-        .iter()
-        .enumerate()
-    {
+    let ids = &bins.gaussian_ids[start as usize..end as usize];
+    let mut vis_pos = 0;
+    for (n, (&g, &mask)) in ids.iter().zip(masks).enumerate() {
+        if mask == 0 {
+            // Blended nowhere in the forward: its gradient slots stay zero.
+            continue;
+        }
         let g = g as usize;
         let isect_out = &mut out[n * stride..(n + 1) * stride];
         let sp = Splat2d::load(projected, g);
-        let [x0, y0, x1, y1] = footprint(projected, g, ox, oy);
         let label_values = &projected.labels[g * labels..(g + 1) * labels];
         let mut s_dx = [0.0f32; LANES];
         let mut s_dy = [0.0f32; LANES];
@@ -134,26 +138,25 @@ fn backward_tile_impl(
         let mut s_op = [0.0f32; LANES];
         let mut s_chan = [[0.0f32; LANES]; 4];
         let mut s_lab = [[0.0f32; LANES]; MAX_LABEL_CHANNELS];
-        let power_max = power_limit(sp.opacity, alpha_threshold);
-        for y in y0..y1 {
+        // Only the segments where the forward blended or stopped a pixel: every other one
+        // would leave the replayed state and these sums unchanged.
+        let mut todo = mask;
+        while todo != 0 {
+            let s = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let (y, half) = (s / 2, (s % 2) * LANES);
             let dy = sp.my - (oy + y as f32 + 0.5);
-            let (x0, x1) = row_span(&sp, power_max, dy, ox, x0, x1);
-            for half in [0, LANES] {
-                if x1 <= half || x0 >= half + LANES {
-                    continue;
-                }
+            {
                 let base = y * TS + half;
-                let live_seg: &mut [bool; LANES] =
-                    (&mut live[base..base + LANES]).try_into().expect("8 lanes");
-                if !live_seg.iter().any(|&l| l) {
-                    continue;
-                }
-                falloff(
+                let stored: &[f32; LANES] = seg_vis[vis_pos..vis_pos + LANES]
+                    .try_into()
+                    .expect("8 lanes");
+                vis_pos += LANES;
+                replay_falloff(
                     &sp,
                     ox + half as f32 + 0.5,
-                    dy,
+                    stored,
                     alpha_max,
-                    alpha_threshold,
                     &mut dx,
                     &mut vis,
                     &mut raw,
@@ -191,12 +194,11 @@ fn backward_tile_impl(
                     .try_into()
                     .expect("8 lanes");
                 for l in 0..LANES {
-                    let valid = live_seg[l] & ok[l];
                     let t = t_seg[l];
+                    let valid = (t > 0.0) & ok[l];
                     let next_t = t * (1.0 - alpha[l]);
                     let stop = valid & (next_t <= TRANSMITTANCE_MIN);
                     let contrib = valid & !stop;
-                    live_seg[l] &= !stop;
                     let wl = if contrib { alpha[l] * t } else { 0.0 };
                     w[l] = wl;
                     p_seg[l] += wl * cg[l];
@@ -215,7 +217,13 @@ fn backward_tile_impl(
                     s_dxdx[l] += v_sigma * d * d;
                     s_dxdy[l] += v_sigma * d * dy;
                     s_dydy[l] += v_sigma * dy * dy;
-                    t_seg[l] = if contrib { next_t } else { t };
+                    t_seg[l] = if contrib {
+                        next_t
+                    } else if stop {
+                        -t
+                    } else {
+                        t
+                    };
                 }
                 for l in 0..LANES {
                     s_chan[0][l] += w[l] * vr[l];
@@ -256,22 +264,16 @@ fn backward_tile_impl(
 fn backward_tile_avx2(
     tile: usize,
     out: &mut [f32],
+    masks: &[u32],
+    seg_vis: &[f32],
     projected: &Projected,
     bins: &TileBins,
     inputs: &TileInputs,
     labels: usize,
     alpha_max: f32,
-    alpha_threshold: f32,
 ) {
     backward_tile_impl(
-        tile,
-        out,
-        projected,
-        bins,
-        inputs,
-        labels,
-        alpha_max,
-        alpha_threshold,
+        tile, out, masks, seg_vis, projected, bins, inputs, labels, alpha_max,
     )
 }
 
@@ -279,39 +281,26 @@ fn backward_tile_avx2(
 fn backward_tile(
     tile: usize,
     out: &mut [f32],
+    masks: &[u32],
+    seg_vis: &[f32],
     projected: &Projected,
     bins: &TileBins,
     inputs: &TileInputs,
     labels: usize,
     alpha_max: f32,
-    alpha_threshold: f32,
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2 (checked just above).
         unsafe {
             backward_tile_avx2(
-                tile,
-                out,
-                projected,
-                bins,
-                inputs,
-                labels,
-                alpha_max,
-                alpha_threshold,
+                tile, out, masks, seg_vis, projected, bins, inputs, labels, alpha_max,
             )
         };
         return;
     }
     backward_tile_impl(
-        tile,
-        out,
-        projected,
-        bins,
-        inputs,
-        labels,
-        alpha_max,
-        alpha_threshold,
+        tile, out, masks, seg_vis, projected, bins, inputs, labels, alpha_max,
     )
 }
 
@@ -322,6 +311,7 @@ pub(crate) fn rasterize_backward(
     projected: &Projected,
     bins: &TileBins,
     state: &[f32],
+    segments: &SegmentStore,
     labels: usize,
     settings: &RenderSettings,
     v_out: &PixelGrads,
@@ -334,14 +324,7 @@ pub(crate) fn rasterize_backward(
     let n_isects = bins.gaussian_ids.len();
     isect_grads.clear();
     isect_grads.resize(n_isects * stride, 0.0);
-    // One slice per tile (a few hundred pointers per frame); the ranges are disjoint.
-    let mut slices: Vec<&mut [f32]> = Vec::with_capacity(bins.tile_ranges.len());
-    let mut rest: &mut [f32] = isect_grads;
-    for [start, end] in &bins.tile_ranges {
-        let (head, tail) = rest.split_at_mut((end - start) as usize * stride);
-        slices.push(head);
-        rest = tail;
-    }
+    let slices = bins.split_by_tile(isect_grads, stride);
     let state_stride = state_channels(labels) * TILE_PIXELS;
     let (w, h) = (width as usize, height as usize);
     slices.into_par_iter().enumerate().for_each(|(tile, out)| {
@@ -371,12 +354,13 @@ pub(crate) fn rasterize_backward(
         backward_tile(
             tile,
             out,
+            &segments.masks[start as usize..end as usize],
+            segments.tile_vis(tile),
             projected,
             bins,
             &inputs,
             labels,
             settings.alpha_max,
-            settings.alpha_threshold,
         );
     });
     let n = projected.radii.len();

@@ -7,6 +7,7 @@ use glam::{Vec2, Vec3};
 use super::bin::TileBins;
 use super::forward::{rasterize, write_output};
 use super::raster_backward::{rasterize_backward, unpack_screen_grads};
+use super::segments::SegmentStore;
 use super::{PixelGrads, Projected, RenderOutput, RenderSettings, ScreenGrads};
 
 const W: u32 = 40;
@@ -69,18 +70,18 @@ fn settings() -> RenderSettings {
     }
 }
 
-fn render(p: &Projected) -> (RenderOutput, TileBins, Vec<f32>) {
+fn render(p: &Projected) -> (RenderOutput, TileBins, Vec<f32>, SegmentStore) {
     let mut bins = TileBins::default();
     bins.build(p, W, H);
-    let mut state = Vec::new();
-    rasterize(p, &bins, L, &settings(), &mut state);
+    let (mut state, mut segments) = (Vec::new(), SegmentStore::default());
+    rasterize(p, &bins, L, &settings(), &mut state, &mut segments);
     let mut out = RenderOutput::default();
     write_output(&state, &bins, L, settings().background, W, H, &mut out);
-    (out, bins, state)
+    (out, bins, state, segments)
 }
 
 fn loss(p: &Projected, w: &Weights) -> f64 {
-    let (out, _, _) = render(p);
+    let (out, ..) = render(p);
     let dot =
         |a: &[f32], b: &[f32]| -> f64 { a.iter().zip(b).map(|(x, y)| *x as f64 * *y as f64).sum() };
     dot(&out.color, &w.color)
@@ -90,7 +91,7 @@ fn loss(p: &Projected, w: &Weights) -> f64 {
 }
 
 fn screen_grads(p: &Projected, w: &Weights) -> ScreenGrads {
-    let (_, bins, state) = render(p);
+    let (_, bins, state, segments) = render(p);
     let v = PixelGrads {
         color: &w.color,
         alpha: Some(&w.alpha),
@@ -102,6 +103,7 @@ fn screen_grads(p: &Projected, w: &Weights) -> ScreenGrads {
         p,
         &bins,
         &state,
+        &segments,
         L,
         &settings(),
         &v,

@@ -1,0 +1,210 @@
+//! Which row segments (8 pixels of one tile row) each intersection can touch, and the store the
+//! forward fills for the backward: per intersection the segments it blended into, per tile the
+//! `exp(-power)` of their lanes. It must not blend.
+
+use rayon::prelude::*;
+
+use super::bin::TileBins;
+use super::forward::{LANES, Splat2d};
+use super::{Projected, TILE_SIZE};
+
+const TS: usize = TILE_SIZE as usize;
+
+/// What the forward leaves for the backward, sized once per frame by [`SegmentStore::prepare`].
+#[derive(Debug, Default)]
+pub(crate) struct SegmentStore {
+    /// Per intersection: before the forward, the segments it can touch; after it, the ones it
+    /// blended into or stopped a pixel in (the only ones the backward replays).
+    pub masks: Vec<u32>,
+    /// Per tile its first float in `vis` (`tiles + 1` entries): room for 8 lanes of every
+    /// segment the tile's intersections can touch.
+    offsets: Vec<usize>,
+    /// `exp(-power)` per lane of the blended segments, -1 where the lane failed the skip test,
+    /// per tile in replay order (intersection, then segment bit).
+    vis: Vec<f32>,
+    counts: Vec<usize>,
+}
+
+impl SegmentStore {
+    /// Computes every intersection's segment mask and reserves exact room for the stored
+    /// falloffs (a per-tile growing buffer kept the worst case of every view, twice over).
+    pub fn prepare(&mut self, projected: &Projected, bins: &TileBins, alpha_threshold: f32) {
+        let tiles = bins.tile_count();
+        self.masks.clear();
+        self.masks.resize(bins.gaussian_ids.len(), 0);
+        self.counts.clear();
+        self.counts.resize(tiles, 0);
+        bins.split_by_tile(&mut self.masks, 1)
+            .into_par_iter()
+            .zip(self.counts.par_iter_mut())
+            .enumerate()
+            .for_each(|(tile, (masks, count))| {
+                *count = tile_masks(tile, masks, projected, bins, alpha_threshold) * LANES;
+            });
+        self.offsets.clear();
+        let mut total = 0;
+        self.offsets.push(0);
+        for &c in &self.counts {
+            total += c;
+            self.offsets.push(total);
+        }
+        // Never shrunk, never cleared: every float the backward reads was written by this
+        // frame's forward first.
+        if self.vis.len() < total {
+            self.vis.resize(total, 0.0);
+        }
+    }
+
+    /// Per tile its masks and its room for falloffs, disjoint, for the forward to fill.
+    pub fn tiles_mut(&mut self, bins: &TileBins) -> Vec<(&mut [u32], &mut [f32])> {
+        let masks = bins.split_by_tile(&mut self.masks, 1);
+        let mut rest = &mut self.vis[..];
+        let mut parts = Vec::with_capacity(masks.len());
+        for (m, w) in masks.into_iter().zip(self.offsets.windows(2)) {
+            let (head, tail) = rest.split_at_mut(w[1] - w[0]);
+            parts.push((m, head));
+            rest = tail;
+        }
+        parts
+    }
+
+    /// A tile's falloffs as the forward wrote them.
+    pub fn tile_vis(&self, tile: usize) -> &[f32] {
+        &self.vis[self.offsets[tile]..self.offsets[tile + 1]]
+    }
+}
+
+/// Writes the segment mask of each intersection of `tile`; returns their total segment count.
+#[inline(always)]
+fn tile_masks_impl(
+    tile: usize,
+    masks: &mut [u32],
+    projected: &Projected,
+    bins: &TileBins,
+    alpha_threshold: f32,
+) -> usize {
+    let tiles_x = bins.tiles_x as usize;
+    let (ox, oy) = (
+        ((tile % tiles_x) * TS) as f32,
+        ((tile / tiles_x) * TS) as f32,
+    );
+    let [start, end] = bins.tile_ranges[tile];
+    let ids = &bins.gaussian_ids[start as usize..end as usize];
+    let mut segments = 0;
+    for (mask, &g) in masks.iter_mut().zip(ids) {
+        let g = g as usize;
+        let sp = Splat2d::load(projected, g);
+        let power_max = power_limit(sp.opacity, alpha_threshold);
+        *mask = segment_mask(&sp, power_max, footprint(projected, g, ox, oy), ox, oy);
+        segments += mask.count_ones() as usize;
+    }
+    segments
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn tile_masks_avx2(
+    tile: usize,
+    masks: &mut [u32],
+    projected: &Projected,
+    bins: &TileBins,
+    alpha_threshold: f32,
+) -> usize {
+    tile_masks_impl(tile, masks, projected, bins, alpha_threshold)
+}
+
+/// [`tile_masks_impl`] with AVX2 where the CPU has it: the 16-row mask then vectorises and
+/// rounds in registers (baseline x86-64 has no vector floor/ceil and calls libm per row).
+fn tile_masks(
+    tile: usize,
+    masks: &mut [u32],
+    projected: &Projected,
+    bins: &TileBins,
+    alpha_threshold: f32,
+) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { tile_masks_avx2(tile, masks, projected, bins, alpha_threshold) };
+    }
+    tile_masks_impl(tile, masks, projected, bins, alpha_threshold)
+}
+
+/// The pixel rows `[y0, y1)` and columns `[x0, x1)` of a tile whose centres lie in a Gaussian's
+/// extent box (`origin` is the tile's top-left pixel).
+#[inline(always)]
+pub(crate) fn footprint(p: &Projected, g: usize, ox: f32, oy: f32) -> [usize; 4] {
+    let m = p.means2d[g];
+    let e = p.extents[g];
+    let ts = TS as f32;
+    let lo = |v: f32| v.ceil().max(0.0).min(ts) as usize;
+    let hi = |v: f32| (v.floor() + 1.0).max(0.0).min(ts) as usize;
+    [
+        lo(m.x - e.x - 0.5 - ox),
+        lo(m.y - e.y - 0.5 - oy),
+        hi(m.x + e.x - 0.5 - ox),
+        hi(m.y + e.y - 0.5 - oy),
+    ]
+}
+
+/// Row segments of a tile (row `y`, half `h`: pixels `8h..8h + 8`) whose pixel centres can
+/// reach the alpha threshold, as bit `2y + h`: per row the chord of the ellipse
+/// `power <= ln(opacity / threshold)`, padded, clipped to the footprint `[x0, y0, x1, y1]`.
+/// Pixels outside it would be skipped by the blend loop anyway, so visiting only these changes
+/// no result; it saves the work on the ellipse's rounded ends. All 16 rows at once so the
+/// square roots and divisions vectorise instead of running one dependent chain per row.
+#[inline(always)]
+pub(crate) fn segment_mask(
+    sp: &Splat2d,
+    power_max: f32,
+    [x0, y0, x1, y1]: [usize; 4],
+    ox: f32,
+    oy: f32,
+) -> u32 {
+    if x0 >= x1 || y0 >= y1 {
+        return 0;
+    }
+    let ts = TS as f32;
+    let (fx0, fx1) = (x0 as f32, x1 as f32);
+    let mut lo = [fx0; TS];
+    let mut hi = [fx1; TS];
+    if power_max.is_finite() {
+        for y in 0..TS {
+            let dy = sp.my - (oy + y as f32 + 0.5);
+            // 0.5 (a dx² + c dy²) + b dx dy <= P  <=>  a dx² + 2 b dy dx + c dy² - 2 P <= 0.
+            let disc = sp.b * sp.b * dy * dy - sp.a * (sp.c * dy * dy - 2.0 * power_max);
+            let root = disc.max(0.0).sqrt();
+            let dx_lo = (-sp.b * dy - root) / sp.a;
+            let dx_hi = (-sp.b * dy + root) / sp.a;
+            // Pixel centre ox + x + 0.5 = mean.x - dx.
+            let l = (sp.mx - dx_hi - 0.5 - ox - 0.05).ceil().max(0.0).min(ts);
+            let h = ((sp.mx - dx_lo - 0.5 - ox + 0.05).floor() + 1.0)
+                .max(0.0)
+                .min(ts);
+            // `!(disc >= 0)` also empties the row when disc is NaN.
+            let empty = !(disc >= 0.0);
+            lo[y] = if empty { ts } else { l.max(fx0) };
+            hi[y] = if empty { 0.0 } else { h.min(fx1) };
+        }
+    }
+    let lanes = LANES as f32;
+    let mut bits = [0u32; TS];
+    for y in 0..TS {
+        let rows = y >= y0 && y < y1 && lo[y] < hi[y];
+        let left = rows && lo[y] < lanes;
+        let right = rows && hi[y] > lanes;
+        bits[y] = ((left as u32) | ((right as u32) << 1)) << (2 * y);
+    }
+    bits.iter().fold(0, |m, &b| m | b)
+}
+
+/// `ln(opacity / threshold)` with a safety margin: the largest power that can still blend;
+/// infinite when there is no threshold.
+#[inline(always)]
+pub(crate) fn power_limit(opacity: f32, alpha_threshold: f32) -> f32 {
+    if alpha_threshold > 0.0 {
+        (opacity / alpha_threshold).ln() * 1.001 + 0.01
+    } else {
+        f32::INFINITY
+    }
+}
