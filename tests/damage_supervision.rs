@@ -105,6 +105,35 @@ fn label_mode_learns_the_damage_on_held_out_views() {
     // channels render where the damage is, also from views the twin never saw.
     assert!(fit["spalling"] > 0.25 && fit["crack"] > 0.05, "{fit:?}");
     assert!(after["spalling"] > 0.1, "{after:?}");
+
+    // The CLI reads the same figures back from the saved model.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let model = dir.path().join("model.ply");
+    damage_twin::scene::ply::write_splats(&model, &splats).expect("model saves");
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_damage-twin"))
+        .arg("eval")
+        .arg(&model)
+        .arg(&survey().root)
+        .arg("--json")
+        .output()
+        .expect("eval runs");
+    assert!(output.status.success(), "{output:?}");
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).expect("JSON");
+    assert_eq!(report["damage_mode"], "label");
+    for figure in ["iou", "precision", "recall", "f1"] {
+        for class in ["crack", "spalling"] {
+            let value = report[figure][class].as_f64();
+            assert!(
+                value.is_some_and(|v| (0.0..=1.0).contains(&v)),
+                "{figure}.{class}: {report}"
+            );
+        }
+    }
+    let cli_iou = report["iou"]["spalling"].as_f64().unwrap_or(-1.0);
+    assert!(
+        (cli_iou - after["spalling"]).abs() < 1e-9,
+        "{cli_iou} vs {after:?}"
+    );
 }
 
 #[test]
