@@ -18,6 +18,8 @@ use damage_twin::scene::Dataset;
 use damage_twin::scene::open::OpenOptions;
 use damage_twin::train::job::{JobEvent, JobOptions, TrainJob};
 
+use super::train::print_line;
+
 #[derive(clap::Args)]
 pub struct Args {
     /// Run without a window and write the results to `--out`.
@@ -126,13 +128,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         step: p.step,
                         psnr,
                     });
-                    bar.println(format!("step {}: held-out PSNR {psnr:.2} dB", p.step));
+                    print_line(&bar, format!("step {}: held-out PSNR {psnr:.2} dB", p.step));
                 }
                 bar.set_position(u64::from(p.step));
             }
-            JobEvent::Log(line) => bar.println(line),
+            JobEvent::Log(line) => print_line(&bar, line),
             JobEvent::NanRolledBack { step, reason } => {
-                bar.println(format!("step {step} rolled back: {reason}"))
+                print_line(&bar, format!("step {step} rolled back: {reason}"))
             }
             JobEvent::Snapshot(_) => {}
             JobEvent::Finished(o) => outcome = Some(Ok(o)),

@@ -16,7 +16,7 @@ use damage_twin::damage::study::{StudyConfig, StudyEvent, StudyRow, run_study};
 use damage_twin::report::study_chart::{study_csv, study_table, write_study_chart};
 use damage_twin::scene::ImageScale;
 
-use super::train::{holdout, open_dataset, palette, parse_scale};
+use super::train::{holdout, open_dataset, palette, parse_scale, print_line};
 
 #[derive(clap::Subcommand, Debug)]
 pub enum Study {
@@ -111,10 +111,11 @@ pub fn run(study: Study) -> anyhow::Result<()> {
         StudyEvent::Step { run, step, .. } => bar.set_position(run as u64 * iters + u64::from(step)),
         StudyEvent::RunFinished { rows, .. } => {
             for r in rows {
-                bar.println(format!(
+                let line = format!(
                     "{} rate {:.2} {:<9} input IoU {:.3} → twin IoU {:.3} (train views), {:.3} (held-out)",
                     r.mode, r.rate, r.class, r.input_iou, r.twin_iou_train, r.twin_iou_heldout
-                ));
+                );
+                print_line(&bar, line);
             }
         }
     })

