@@ -8,12 +8,15 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use crate::damage::evaluate::{DamageReadout, DamageScores, ReferenceView, evaluate_damage};
+use crate::damage::evaluate::{
+    DamageReadout, DamageScores, ReferenceView, evaluate_damage, predicted_masks,
+};
 use crate::damage::overlay::OVERLAY_TOLERANCE;
 use crate::damage::reference::{ReferenceSource, load_reference_views, reference_source};
 use crate::damage::setup::{RunConfig, apply_mode, model_and_spec};
 use crate::damage::{DamageClass, TrainMode};
 use crate::metrics::MaskAgreement;
+use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
 use crate::scene::masks::resize_mask_nearest;
 use crate::scene::{Dataset, Mask};
 use crate::synth::corrupt::{corrupt_class_mask, noisy_views};
@@ -49,6 +52,14 @@ pub struct StudyRow {
     pub twin_f1_heldout: f64,
     pub twin_precision_heldout: f64,
     pub twin_recall_heldout: f64,
+    /// IoU of the corrupted masks against the clean ones on the corrupted views only.
+    pub input_iou_noisy_views: f64,
+    /// IoU of the twin against the clean masks on the same (corrupted) views.
+    pub twin_iou_noisy_views: f64,
+    /// Pixels of the corrupted views where the corrupted mask disagrees with the clean one.
+    pub corrupted_pixels: u64,
+    /// Of those, the fraction the twin renders as the clean mask has them (error removed).
+    pub corrupted_pixels_corrected: f64,
     /// Views whose masks were corrupted, of the training views.
     pub noisy_views: usize,
     pub train_seconds: f64,
@@ -107,7 +118,8 @@ pub fn run_study(
     let mut run = 0;
     for &rate in &config.rates {
         let (noisy, corrupted) = corrupt(&clean, rate, config.noise_seed);
-        let input = agreement(&corrupted, &clean.reference);
+        let input = agreement(&corrupted, &clean.reference, None);
+        let input_noisy = agreement(&corrupted, &clean.reference, Some(&noisy));
         for &mode in &config.modes {
             on_event(StudyEvent::RunStarted {
                 run,
@@ -161,18 +173,28 @@ pub fn run_study(
                 tolerance: OVERLAY_TOLERANCE,
                 palette: config.run.palette,
             };
-            let background = config.run.background;
-            let train_scores =
-                evaluate_damage(&outcome.splats, &clean.reference, &readout, background);
-            let heldout_scores = evaluate_damage(&outcome.splats, &heldout, &readout, background);
+            let training = score_training_views(
+                &outcome.splats,
+                &clean,
+                &corrupted,
+                &noisy,
+                &readout,
+                config.run.background,
+            );
+            let heldout_scores =
+                evaluate_damage(&outcome.splats, &heldout, &readout, config.run.background);
             let psnr = heldout_psnr(dataset, &heldout_indices, &run_config, &outcome.splats);
+            let inputs = Inputs {
+                all: &input,
+                noisy: &input_noisy,
+                noisy_views: noisy.iter().filter(|&&n| n).count(),
+            };
             let run_rows = rows_for(
                 mode,
                 rate,
-                &input,
-                &train_scores,
+                &inputs,
+                &training,
                 &heldout_scores,
-                noisy,
                 started.elapsed().as_secs_f64(),
                 outcome.splats.len(),
                 psnr,
@@ -240,7 +262,7 @@ fn structure_pixels(dataset: &Dataset, name: &str, width: u32, height: u32) -> V
 }
 
 /// The training masks at `rate`: which views are noisy, and per view per class the masks.
-fn corrupt(clean: &CleanTraining, rate: f32, seed: u64) -> (usize, Vec<Vec<Mask>>) {
+fn corrupt(clean: &CleanTraining, rate: f32, seed: u64) -> (Vec<bool>, Vec<Vec<Mask>>) {
     let noisy = noisy_views(clean.views.len(), rate, seed);
     let mut rng = fastrand::Rng::with_seed(seed ^ 0x5EED_0FB1_0B00);
     let masks = clean
@@ -259,16 +281,80 @@ fn corrupt(clean: &CleanTraining, rate: f32, seed: u64) -> (usize, Vec<Vec<Mask>
             masks
         })
         .collect();
-    (noisy.iter().filter(|&&n| n).count(), masks)
+    (noisy, masks)
 }
 
-/// Agreement of the corrupted training masks with the clean ones, per class.
-fn agreement(corrupted: &[Vec<Mask>], clean: &[ReferenceView]) -> DamageScores {
+/// Agreement of the corrupted training masks with the clean ones, per class, over every
+/// training view or (with `only`) over the flagged ones.
+fn agreement(
+    corrupted: &[Vec<Mask>],
+    clean: &[ReferenceView],
+    only: Option<&[bool]>,
+) -> DamageScores {
     let mut scores = DamageScores::default();
-    for (masks, reference) in corrupted.iter().zip(clean) {
-        scores.add_view(masks, &reference.reference);
+    for (i, (masks, reference)) in corrupted.iter().zip(clean).enumerate() {
+        if only.is_none_or(|flags| flags[i]) {
+            scores.add_view(masks, &reference.reference);
+        }
     }
     scores
+}
+
+/// The twin on the training views: against the clean masks on every view and on the corrupted
+/// views only, and per class how many of the corrupted pixels (input ≠ clean) it renders right.
+struct TrainingScores {
+    all: DamageScores,
+    noisy: DamageScores,
+    /// Per class in `DamageClass::ALL` order: (corrupted pixels the twin renders as the clean
+    /// mask has them, corrupted pixels).
+    corrected: [(u64, u64); 3],
+}
+
+fn score_training_views(
+    splats: &crate::splats::Splats,
+    clean: &CleanTraining,
+    corrupted: &[Vec<Mask>],
+    noisy: &[bool],
+    readout: &DamageReadout,
+    background: glam::Vec3,
+) -> TrainingScores {
+    let settings = RenderSettings::new(background, splats.sh_degree);
+    let mut rasterizer = Rasterizer::new();
+    let mut out = RenderOutput::default();
+    let mut scores = TrainingScores {
+        all: DamageScores::default(),
+        noisy: DamageScores::default(),
+        corrected: [(0, 0); 3],
+    };
+    for (i, view) in clean.reference.iter().enumerate() {
+        rasterizer.forward(splats, &view.camera, &settings, &mut out);
+        let predicted = predicted_masks(&out, readout);
+        scores.all.add_view(&predicted, &view.reference);
+        if !noisy[i] {
+            continue;
+        }
+        scores.noisy.add_view(&predicted, &view.reference);
+        for (k, reference) in view.reference.iter().enumerate() {
+            let Some(reference) = reference else { continue };
+            let input = &corrupted[i][k].data;
+            for ((&r, &c), &p) in reference.data.iter().zip(input).zip(&predicted[k].data) {
+                if (r != 0) != (c != 0) {
+                    scores.corrected[k].1 += 1;
+                    if (p != 0) == (r != 0) {
+                        scores.corrected[k].0 += 1;
+                    }
+                }
+            }
+        }
+    }
+    scores
+}
+
+/// The corrupted inputs' agreement with the clean masks.
+struct Inputs<'a> {
+    all: &'a DamageScores,
+    noisy: &'a DamageScores,
+    noisy_views: usize,
 }
 
 fn heldout_psnr(
@@ -287,10 +373,9 @@ fn heldout_psnr(
 fn rows_for(
     mode: TrainMode,
     rate: f32,
-    input: &DamageScores,
-    train: &DamageScores,
+    input: &Inputs,
+    train: &TrainingScores,
     heldout: &DamageScores,
-    noisy_views: usize,
     train_seconds: f64,
     gaussians: usize,
     heldout_psnr: Option<f64>,
@@ -303,24 +388,36 @@ fn rows_for(
         .filter(|c| {
             // Only classes there is something to find in: an absent class scores a vacuous 1.
             input
+                .all
                 .classes
                 .get(c)
                 .is_some_and(|a| a.true_positive + a.false_negative > 0)
         })
-        .map(|&class| StudyRow {
-            mode,
-            rate,
-            class,
-            input_iou: figure(input, class, MaskAgreement::iou),
-            twin_iou_train: figure(train, class, MaskAgreement::iou),
-            twin_iou_heldout: figure(heldout, class, MaskAgreement::iou),
-            twin_f1_heldout: figure(heldout, class, MaskAgreement::f1),
-            twin_precision_heldout: figure(heldout, class, MaskAgreement::precision),
-            twin_recall_heldout: figure(heldout, class, MaskAgreement::recall),
-            noisy_views,
-            train_seconds,
-            gaussians,
-            heldout_psnr,
+        .map(|&class| {
+            let (fixed, wrong) = train.corrected[class.channel()];
+            StudyRow {
+                mode,
+                rate,
+                class,
+                input_iou: figure(input.all, class, MaskAgreement::iou),
+                twin_iou_train: figure(&train.all, class, MaskAgreement::iou),
+                twin_iou_heldout: figure(heldout, class, MaskAgreement::iou),
+                twin_f1_heldout: figure(heldout, class, MaskAgreement::f1),
+                twin_precision_heldout: figure(heldout, class, MaskAgreement::precision),
+                twin_recall_heldout: figure(heldout, class, MaskAgreement::recall),
+                input_iou_noisy_views: figure(input.noisy, class, MaskAgreement::iou),
+                twin_iou_noisy_views: figure(&train.noisy, class, MaskAgreement::iou),
+                corrupted_pixels: wrong,
+                corrupted_pixels_corrected: if wrong > 0 {
+                    fixed as f64 / wrong as f64
+                } else {
+                    f64::NAN
+                },
+                noisy_views: input.noisy_views,
+                train_seconds,
+                gaussians,
+                heldout_psnr,
+            }
         })
         .collect()
 }

@@ -56,10 +56,20 @@ fn mode_colour(mode: TrainMode) -> RGBColor {
     }
 }
 
+/// Which views a panel scores.
+#[derive(Clone, Copy, PartialEq)]
+enum Views {
+    /// Every training view (inputs, twin) and the held-out views (twin).
+    All,
+    /// Only the training views whose masks were corrupted.
+    Corrupted,
+}
+
 fn panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     rows: &[StudyRow],
     class: DamageClass,
+    views: Views,
 ) -> DrawResult
 where
     DB::ErrorType: 'static,
@@ -83,7 +93,16 @@ where
         .x_desc("fraction of training views with corrupted masks")
         .y_desc("IoU")
         .draw()?;
-    let input = series(rows, class, None, |r| r.input_iou);
+    let rows_with_noise: Vec<StudyRow> = rows
+        .iter()
+        .filter(|r| views == Views::All || r.noisy_views > 0)
+        .cloned()
+        .collect();
+    let rows = &rows_with_noise[..];
+    let input = match views {
+        Views::All => series(rows, class, None, |r| r.input_iou),
+        Views::Corrupted => series(rows, class, None, |r| r.input_iou_noisy_views),
+    };
     let grey = RGBColor(90, 90, 90);
     chart
         .draw_series(LineSeries::new(input.iter().copied(), grey.stroke_width(2)))?
@@ -96,6 +115,20 @@ where
     )?;
     for mode in modes(rows) {
         let colour = mode_colour(mode);
+        if views == Views::Corrupted {
+            let twin = series(rows, class, Some(mode), |r| r.twin_iou_noisy_views);
+            chart
+                .draw_series(LineSeries::new(
+                    twin.iter().copied(),
+                    colour.stroke_width(3),
+                ))?
+                .label(format!("twin, {mode} mode, same views"))
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 18, y)], colour.stroke_width(3))
+                });
+            chart.draw_series(twin.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
+            continue;
+        }
         let heldout = series(rows, class, Some(mode), |r| r.twin_iou_heldout);
         chart
             .draw_series(LineSeries::new(
@@ -132,9 +165,10 @@ where
 {
     root.fill(&WHITE)?;
     let classes = classes(rows);
-    let areas = root.split_evenly((1, classes.len().max(1)));
-    for (area, class) in areas.iter().zip(classes) {
-        panel(area, rows, class)?;
+    let areas = root.split_evenly((2, classes.len().max(1)));
+    for (k, class) in classes.iter().enumerate() {
+        panel(&areas[k], rows, *class, Views::All)?;
+        panel(&areas[classes.len() + k], rows, *class, Views::Corrupted)?;
     }
     root.present()?;
     Ok(())
@@ -165,8 +199,8 @@ pub fn write_study_chart(
 /// The rows as a Markdown table (for docs/).
 pub fn study_table(rows: &[StudyRow]) -> String {
     let mut text = String::from(
-        "| mode | rate | class | input IoU | twin IoU (train views) | twin IoU (held-out) | twin F1 (held-out) |\n\
-         |---|---|---|---|---|---|---|\n",
+        "| mode | rate | class | input IoU | twin IoU (train views) | twin IoU (held-out) | twin F1 (held-out) | input IoU (corrupted views) | twin IoU (corrupted views) | corrupted pixels corrected |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let _ = writeln!(
@@ -188,12 +222,13 @@ pub fn study_table(rows: &[StudyRow]) -> String {
 pub fn study_csv(rows: &[StudyRow]) -> String {
     let mut text = String::from(
         "mode,rate,class,input_iou,twin_iou_train,twin_iou_heldout,twin_f1_heldout,\
-         twin_precision_heldout,twin_recall_heldout,noisy_views,train_seconds,gaussians,heldout_psnr\n",
+         twin_precision_heldout,twin_recall_heldout,input_iou_noisy_views,twin_iou_noisy_views,\
+         corrupted_pixels,corrupted_pixels_corrected,noisy_views,train_seconds,gaussians,heldout_psnr\n",
     );
     for r in rows {
         let _ = writeln!(
             text,
-            "{},{},{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.2},{},{}",
+            "{},{},{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.5},{},{:.2},{},{}",
             r.mode,
             r.rate,
             r.class,
@@ -203,6 +238,10 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
             r.twin_f1_heldout,
             r.twin_precision_heldout,
             r.twin_recall_heldout,
+            r.input_iou_noisy_views,
+            r.twin_iou_noisy_views,
+            r.corrupted_pixels,
+            r.corrupted_pixels_corrected,
             r.noisy_views,
             r.train_seconds,
             r.gaussians,
