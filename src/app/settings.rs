@@ -68,8 +68,10 @@ impl Default for TrainingSettings {
     fn default() -> Self {
         TrainingSettings {
             iterations: 3000,
-            // Half of 960×540: fast enough on a CPU trainer to see the twin form within a minute.
-            resolution_factor: 2,
+            // A quarter of the 960×540 demo (240×135): at half size the CPU trainer managed about
+            // one step per second on a loaded 2-core machine beside the viewer (measured under
+            // Xvfb); a quarter is 4× cheaper and is the scale of docs/DAMAGE.md's figures.
+            resolution_factor: 4,
             mode: TrainMode::Label,
             label_weight: 0.1,
         }

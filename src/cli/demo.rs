@@ -78,9 +78,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
 
     // 2. Training, exactly as the viewer starts it.
+    // Trained at 240×135 like the viewer's demo (a quarter of its 960×540; half of this 480×270).
     let training = TrainingSettings {
         iterations: args.iterations,
-        resolution_factor: 1,
+        resolution_factor: 2,
         mode: args.mode,
         ..TrainingSettings::default()
     };
