@@ -57,6 +57,28 @@ pub struct MaskNoiseArgs {
     pub seed: u64,
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Train nothing: redraw the chart and tables from an existing `--out DIR/study.json`.
+    #[arg(long)]
+    pub replot: bool,
+}
+
+#[derive(serde::Deserialize)]
+struct SavedStudy {
+    rows: Vec<StudyRow>,
+}
+
+/// Writes the CSV, Markdown table and chart of `rows` into `dir`.
+fn write_reports(dir: &std::path::Path, rows: &[StudyRow]) -> anyhow::Result<Vec<PathBuf>> {
+    let write = |name: &str, text: String| -> anyhow::Result<()> {
+        let path = dir.join(name);
+        damage_twin::scene::atomic::write_atomic(&path, |w| {
+            std::io::Write::write_all(w, text.as_bytes())
+        })
+        .with_context(|| format!("writing {}", path.display()))
+    };
+    write("study.csv", study_csv(rows))?;
+    write("study.md", study_table(rows))?;
+    write_study_chart(dir, "study", rows).map_err(anyhow::Error::msg)
 }
 
 #[derive(Serialize)]
@@ -73,6 +95,20 @@ struct StudyFile<'a> {
 
 pub fn run(study: Study) -> anyhow::Result<()> {
     let Study::MaskNoise(args) = study;
+    if args.replot {
+        let path = args.out.join("study.json");
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {}", path.display()))?;
+        let saved: SavedStudy = serde_json::from_str(&text)
+            .with_context(|| format!("{} is not a study.json", path.display()))?;
+        let charts = write_reports(&args.out, &saved.rows)?;
+        eprintln!(
+            "redrew {} rows into {}",
+            saved.rows.len(),
+            charts[0].display()
+        );
+        return Ok(());
+    }
     if args.rates.iter().any(|r| !(0.0..=1.0).contains(r)) {
         anyhow::bail!("rates must lie in [0, 1], got {:?}", args.rates);
     }
@@ -133,17 +169,12 @@ pub fn run(study: Study) -> anyhow::Result<()> {
         seconds,
         rows: &rows,
     };
-    let write = |name: &str, text: String| -> anyhow::Result<()> {
-        let path = args.out.join(name);
-        damage_twin::scene::atomic::write_atomic(&path, |w| {
-            std::io::Write::write_all(w, text.as_bytes())
-        })
-        .with_context(|| format!("writing {}", path.display()))
-    };
-    write("study.json", serde_json::to_string_pretty(&file)?)?;
-    write("study.csv", study_csv(&rows))?;
-    write("study.md", study_table(&rows))?;
-    let charts = write_study_chart(&args.out, "study", &rows).map_err(anyhow::Error::msg)?;
+    let path = args.out.join("study.json");
+    damage_twin::scene::atomic::write_atomic(&path, |w| {
+        std::io::Write::write_all(w, serde_json::to_string_pretty(&file)?.as_bytes())
+    })
+    .with_context(|| format!("writing {}", path.display()))?;
+    let charts = write_reports(&args.out, &rows)?;
     eprintln!(
         "study done in {seconds:.0} s: {} rows; wrote study.json, study.csv, study.md and {}",
         rows.len(),

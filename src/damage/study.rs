@@ -38,33 +38,48 @@ pub struct StudyConfig {
 }
 
 /// One (mode, rate, class) result.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct StudyRow {
     pub mode: TrainMode,
     pub rate: f32,
     pub class: DamageClass,
     /// IoU of the corrupted training masks against the clean ones.
+    #[serde(deserialize_with = "nan_if_null")]
     pub input_iou: f64,
     /// IoU of the twin's rendered masks against the clean ones, on the training views.
+    #[serde(deserialize_with = "nan_if_null")]
     pub twin_iou_train: f64,
     /// The same on held-out views.
+    #[serde(deserialize_with = "nan_if_null")]
     pub twin_iou_heldout: f64,
     pub twin_f1_heldout: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub twin_precision_heldout: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub twin_recall_heldout: f64,
     /// IoU of the corrupted masks against the clean ones on the corrupted views only.
+    #[serde(deserialize_with = "nan_if_null")]
     pub input_iou_noisy_views: f64,
     /// IoU of the twin against the clean masks on the same (corrupted) views.
+    #[serde(deserialize_with = "nan_if_null")]
     pub twin_iou_noisy_views: f64,
     /// Pixels of the corrupted views where the corrupted mask disagrees with the clean one.
     pub corrupted_pixels: u64,
     /// Of those, the fraction the twin renders as the clean mask has them (error removed).
+    #[serde(deserialize_with = "nan_if_null")]
     pub corrupted_pixels_corrected: f64,
     /// Views whose masks were corrupted, of the training views.
     pub noisy_views: usize,
+    #[serde(deserialize_with = "nan_if_null")]
     pub train_seconds: f64,
     pub gaussians: usize,
     pub heldout_psnr: Option<f64>,
+}
+
+/// JSON has no NaN (serde_json writes null): read null back as NaN.
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    use serde::Deserialize;
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 /// Progress of the study, for a progress bar.

@@ -81,8 +81,11 @@ where
         .max(0.1);
     let mut chart = ChartBuilder::on(area)
         .caption(
-            format!("{class}: IoU against clean masks"),
-            ("sans-serif", 18),
+            match views {
+                Views::All => format!("{class}: IoU against clean masks, all views"),
+                Views::Corrupted => format!("{class}: IoU on the corrupted training views"),
+            },
+            ("sans-serif", 17),
         )
         .margin(10)
         .x_label_area_size(36)
@@ -184,12 +187,12 @@ pub fn write_study_chart(
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
     draw(
-        BitMapBackend::new(&png, (width, 480)).into_drawing_area(),
+        BitMapBackend::new(&png, (width, 1000)).into_drawing_area(),
         rows,
     )
     .map_err(|e| format!("drawing {}: {e}", png.display()))?;
     draw(
-        SVGBackend::new(&svg, (width, 480)).into_drawing_area(),
+        SVGBackend::new(&svg, (width, 1000)).into_drawing_area(),
         rows,
     )
     .map_err(|e| format!("drawing {}: {e}", svg.display()))?;
@@ -202,17 +205,37 @@ pub fn study_table(rows: &[StudyRow]) -> String {
         "| mode | rate | class | input IoU | twin IoU (train views) | twin IoU (held-out) | twin F1 (held-out) | input IoU (corrupted views) | twin IoU (corrupted views) | corrupted pixels corrected |\n\
          |---|---|---|---|---|---|---|---|---|---|\n",
     );
+    // No corrupted views at rate 0: those columns have nothing to show.
+    let value = |v: f64| {
+        if v.is_finite() {
+            format!("{v:.3}")
+        } else {
+            "–".to_string()
+        }
+    };
     for r in rows {
+        let corrected = if r.corrupted_pixels > 0 {
+            format!(
+                "{:.1} % of {}",
+                100.0 * r.corrupted_pixels_corrected,
+                r.corrupted_pixels
+            )
+        } else {
+            "–".to_string()
+        };
         let _ = writeln!(
             text,
-            "| {} | {:.2} | {} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            "| {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.mode,
             r.rate,
             r.class,
-            r.input_iou,
-            r.twin_iou_train,
-            r.twin_iou_heldout,
-            r.twin_f1_heldout
+            value(r.input_iou),
+            value(r.twin_iou_train),
+            value(r.twin_iou_heldout),
+            value(r.twin_f1_heldout),
+            value(r.input_iou_noisy_views),
+            value(r.twin_iou_noisy_views),
+            corrected
         );
     }
     text
