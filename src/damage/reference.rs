@@ -7,7 +7,7 @@ use rayon::prelude::*;
 
 use crate::damage::DamageClass;
 use crate::damage::evaluate::ReferenceView;
-use crate::scene::{Dataset, ImageScale, Mask, SceneError};
+use crate::scene::{Dataset, ImageScale, SceneError};
 
 /// Where reference masks come from.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -39,22 +39,8 @@ pub fn reference_source(dataset: &Dataset) -> Option<ReferenceSource> {
         .map(ReferenceSource::DatasetMasks)
 }
 
-/// Per class (`DamageClass::ALL` order) the reference mask of view `index` at `scale`; `None`
-/// for a class without a mask file for this view.
-pub fn reference_masks(
-    dataset: &Dataset,
-    source: &ReferenceSource,
-    index: usize,
-    scale: ImageScale,
-) -> Result<Vec<Option<Mask>>, SceneError> {
-    let mut masks = dataset.load_view_masks(index, source.dir(), scale)?;
-    Ok(DamageClass::ALL
-        .iter()
-        .map(|class| masks.remove(class))
-        .collect())
-}
-
-/// Cameras (at `scale`) and reference masks of the views `indices`, loaded in parallel.
+/// Cameras (at `scale`) and reference masks of the views `indices`, loaded in parallel: per
+/// class (`DamageClass::ALL` order) a mask, `None` for a class without a mask file for the view.
 pub fn load_reference_views(
     dataset: &Dataset,
     source: &ReferenceSource,
@@ -64,15 +50,14 @@ pub fn load_reference_views(
     indices
         .par_iter()
         .map(|&index| {
-            let view = &dataset.views[index];
-            let stored = image::image_dimensions(&view.image_path).map_err(|e| {
-                SceneError::invalid(&view.image_path, format!("cannot read the image size: {e}"))
-            })?;
-            let (width, height) = scale.apply(stored.0, stored.1);
+            let (camera, mut masks) = dataset.load_view_masks(index, source.dir(), scale)?;
             Ok(ReferenceView {
-                name: view.name.clone(),
-                camera: view.camera.resized(width, height),
-                reference: reference_masks(dataset, source, index, scale)?,
+                name: dataset.views[index].name.clone(),
+                camera,
+                reference: DamageClass::ALL
+                    .iter()
+                    .map(|class| masks.remove(class))
+                    .collect(),
             })
         })
         .collect()

@@ -9,7 +9,7 @@ use crate::damage::DamageClass;
 use crate::scene::masks::{read_view_masks, resize_mask};
 use crate::scene::undistort::{undistort_mask, undistort_rgb};
 use crate::scene::{
-    Camera, Dataset, Distortion, ImageScale, LoadedView, Mask, RgbImage, SceneError,
+    Camera, Dataset, Distortion, ImageScale, LoadedView, Mask, RgbImage, SceneError, View,
 };
 
 fn decode(path: &Path) -> Result<image::DynamicImage, SceneError> {
@@ -185,112 +185,123 @@ fn scale_distortion(d: &Distortion, sx: f32, sy: f32) -> Distortion {
 impl Dataset {
     /// Loads view `index` at `scale`: pixels (alpha composited on `self.background`),
     /// undistorted when the view has a distortion, resized, with the camera resized to match and
-    /// the view's damage masks (a downscaled pixel is damage when any pixel under it is). An image whose size disagrees with its
-    /// camera is an error naming the file — unless it is the camera's size divided by 2, 4 or 8
-    /// (a pre-downscaled copy), in which case the intrinsics are scaled to the image.
+    /// the view's damage masks (a downscaled pixel is damage when any pixel under it is). An image
+    /// whose size disagrees with its camera is an error naming the file — unless it is the
+    /// camera's size divided by 2, 4 or 8 (a pre-downscaled copy), in which case the intrinsics
+    /// are scaled to the image.
     pub fn load_view(&self, index: usize, scale: ImageScale) -> Result<LoadedView, SceneError> {
-        let view = self.views.get(index).ok_or_else(|| {
-            SceneError::invalid(
-                &self.root,
-                format!("view {index} does not exist ({} views)", self.views.len()),
-            )
-        })?;
-        let path = &view.image_path;
-        let mut image = load_image_with_background(path, self.background)?;
+        let view = self.view(index)?;
+        let mut image = load_image_with_background(&view.image_path, self.background)?;
         let stored = (image.width, image.height);
-        let k = view.camera.intrinsics;
-        let mut camera = view.camera;
-        let mut distortion = view.distortion;
-        if stored != (k.width, k.height) {
-            if downscale_factor((k.width, k.height), stored).is_none() {
-                return Err(SceneError::invalid(
-                    path,
-                    format!(
-                        "image is {}×{} but its camera is {}×{}",
-                        stored.0, stored.1, k.width, k.height
-                    ),
-                ));
-            }
-            camera = camera.resized(stored.0, stored.1);
-            let (sx, sy) = (
-                stored.0 as f32 / k.width as f32,
-                stored.1 as f32 / k.height as f32,
-            );
-            distortion = distortion.map(|d| scale_distortion(&d, sx, sy));
-        }
-        let mut masks = match &self.masks_dir {
-            Some(dir) => read_view_masks(dir, &view.name, path, stored)?,
-            None => Default::default(),
-        };
+        let (camera, distortion) = stored_geometry(view, stored)?;
         if let Some(d) = &distortion {
             image = undistort_rgb(&image, d, &camera.intrinsics);
-            for mask in masks.values_mut() {
-                *mask = undistort_mask(mask, d, &camera.intrinsics);
-            }
         }
         let (width, height) = scale.apply(stored.0, stored.1);
-        let image = resize_rgb(&image, width, height);
-        for mask in masks.values_mut() {
-            *mask = resize_mask(mask, width, height);
-        }
+        let masks = match &self.masks_dir {
+            Some(dir) => read_masks_at(
+                dir,
+                view,
+                stored,
+                &camera,
+                distortion.as_ref(),
+                (width, height),
+            )?,
+            None => Default::default(),
+        };
         Ok(LoadedView {
             name: view.name.clone(),
             camera: Camera::resized(&camera, width, height),
-            image,
+            image: resize_rgb(&image, width, height),
             masks,
         })
     }
-}
 
-impl Dataset {
     /// The damage masks of view `index` read from another mask folder (e.g. a synthetic survey's
     /// clean `truth/masks/`), prepared exactly as `load_view` prepares the dataset's own: checked
-    /// against the stored image size, undistorted, resized to `scale`.
+    /// against the stored image size, undistorted, resized to `scale`. Reads only the image's
+    /// header, not its pixels. Returns the camera at `scale` with them.
     pub fn load_view_masks(
         &self,
         index: usize,
         masks_dir: &Path,
         scale: ImageScale,
-    ) -> Result<BTreeMap<DamageClass, Mask>, SceneError> {
-        let view = self.views.get(index).ok_or_else(|| {
+    ) -> Result<(Camera, BTreeMap<DamageClass, Mask>), SceneError> {
+        let view = self.view(index)?;
+        let path = &view.image_path;
+        let stored = image::image_dimensions(path)
+            .map_err(|e| SceneError::invalid(path, format!("cannot read the image size: {e}")))?;
+        let (camera, distortion) = stored_geometry(view, stored)?;
+        let (width, height) = scale.apply(stored.0, stored.1);
+        let masks = read_masks_at(
+            masks_dir,
+            view,
+            stored,
+            &camera,
+            distortion.as_ref(),
+            (width, height),
+        )?;
+        Ok((Camera::resized(&camera, width, height), masks))
+    }
+
+    fn view(&self, index: usize) -> Result<&View, SceneError> {
+        self.views.get(index).ok_or_else(|| {
             SceneError::invalid(
                 &self.root,
                 format!("view {index} does not exist ({} views)", self.views.len()),
             )
-        })?;
-        let path = &view.image_path;
-        let stored = image::image_dimensions(path)
-            .map_err(|e| SceneError::invalid(path, format!("cannot read the image size: {e}")))?;
-        let k = view.camera.intrinsics;
-        let mut camera = view.camera;
-        let mut distortion = view.distortion;
-        if stored != (k.width, k.height) {
-            if downscale_factor((k.width, k.height), stored).is_none() {
-                return Err(SceneError::invalid(
-                    path,
-                    format!(
-                        "image is {}×{} but its camera is {}×{}",
-                        stored.0, stored.1, k.width, k.height
-                    ),
-                ));
-            }
-            camera = camera.resized(stored.0, stored.1);
-            let (sx, sy) = (
-                stored.0 as f32 / k.width as f32,
-                stored.1 as f32 / k.height as f32,
-            );
-            distortion = distortion.map(|d| scale_distortion(&d, sx, sy));
-        }
-        let mut masks = read_view_masks(masks_dir, &view.name, path, stored)?;
-        let (width, height) = scale.apply(stored.0, stored.1);
-        for mask in masks.values_mut() {
-            if let Some(d) = &distortion {
-                *mask = undistort_mask(mask, d, &camera.intrinsics);
-            }
-            *mask = resize_mask(mask, width, height);
-        }
-        Ok(masks)
+        })
     }
+}
+
+/// The view's camera and distortion for its image as stored (`stored` = width, height): as given
+/// when the sizes agree, scaled for a copy pre-downscaled by 2, 4 or 8, else an error naming the
+/// image.
+fn stored_geometry(
+    view: &View,
+    stored: (u32, u32),
+) -> Result<(Camera, Option<Distortion>), SceneError> {
+    let k = view.camera.intrinsics;
+    if stored == (k.width, k.height) {
+        return Ok((view.camera, view.distortion));
+    }
+    if downscale_factor((k.width, k.height), stored).is_none() {
+        return Err(SceneError::invalid(
+            &view.image_path,
+            format!(
+                "image is {}×{} but its camera is {}×{}",
+                stored.0, stored.1, k.width, k.height
+            ),
+        ));
+    }
+    let (sx, sy) = (
+        stored.0 as f32 / k.width as f32,
+        stored.1 as f32 / k.height as f32,
+    );
+    Ok((
+        view.camera.resized(stored.0, stored.1),
+        view.distortion.map(|d| scale_distortion(&d, sx, sy)),
+    ))
+}
+
+/// The view's masks from `dir` at the stored image size, undistorted with the stored-size camera,
+/// then resized to `size`.
+fn read_masks_at(
+    dir: &Path,
+    view: &View,
+    stored: (u32, u32),
+    camera: &Camera,
+    distortion: Option<&Distortion>,
+    size: (u32, u32),
+) -> Result<BTreeMap<DamageClass, Mask>, SceneError> {
+    let mut masks = read_view_masks(dir, &view.name, &view.image_path, stored)?;
+    for mask in masks.values_mut() {
+        if let Some(d) = distortion {
+            *mask = undistort_mask(mask, d, &camera.intrinsics);
+        }
+        *mask = resize_mask(mask, size.0, size.1);
+    }
+    Ok(masks)
 }
 
 #[cfg(test)]
