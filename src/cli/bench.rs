@@ -6,40 +6,23 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
-use glam::Vec3;
 use serde::Serialize;
 
 use damage_twin::metrics::peak_rss_mb;
-use damage_twin::scene::ImageScale;
 use damage_twin::splats::Splats;
 use damage_twin::train::spec::TrainSpec;
 use damage_twin::train::trainer::{StageTimes, Trainer};
 use damage_twin::train::views::{InitialModel, initial_splats, load_views, split_views};
 
-use super::train::{holdout, open_dataset, parse_background, parse_scale};
+use super::train::{RunArgs, holdout, open_dataset};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
     pub dataset: PathBuf,
     #[arg(long, default_value_t = 500)]
     pub iters: u32,
-    #[arg(long, default_value = "1", value_parser = parse_scale)]
-    pub scale: ImageScale,
-    #[arg(long, default_value_t = 3)]
-    pub sh_degree: u32,
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    #[arg(long, default_value_t = 8)]
-    pub test_every: usize,
-    #[arg(long, value_delimiter = ',')]
-    pub test_views: Vec<String>,
-    #[arg(long, default_value = "black", value_parser = parse_background)]
-    pub background: Vec3,
-    #[arg(long, default_value_t = 100_000)]
-    pub init_points: usize,
-    /// Rayon threads (default: RAYON_NUM_THREADS or all cores).
-    #[arg(long)]
-    pub threads: Option<usize>,
+    #[command(flatten)]
+    pub run: RunArgs,
 }
 
 #[derive(Serialize)]
@@ -70,25 +53,27 @@ fn floats_per_gaussian(splats: &Splats) -> usize {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let body = || -> anyhow::Result<Bench> {
-        let dataset = open_dataset(&args.dataset, args.background)?;
-        let (train_idx, test_idx) =
-            split_views(&dataset, &holdout(args.test_every, &args.test_views))
-                .map_err(anyhow::Error::msg)?;
-        let views = load_views(&dataset, &train_idx, args.scale, false)?;
-        let heldout = load_views(&dataset, &test_idx, args.scale, false)?;
+        let dataset = open_dataset(&args.dataset, args.run.background)?;
+        let (train_idx, test_idx) = split_views(
+            &dataset,
+            &holdout(args.run.test_every, &args.run.test_views),
+        )
+        .map_err(anyhow::Error::msg)?;
+        let views = load_views(&dataset, &train_idx, args.run.scale, false)?;
+        let heldout = load_views(&dataset, &test_idx, args.run.scale, false)?;
         let init = InitialModel {
-            sh_degree: args.sh_degree,
+            sh_degree: args.run.sh_degree,
             label_channels: 0,
-            random_points: args.init_points,
-            seed: args.seed,
+            random_points: args.run.init_points,
+            seed: args.run.seed,
         };
         let splats = initial_splats(&dataset, &views, &init).context("initial Gaussians")?;
         let initial_gaussians = splats.len();
         let mut spec = TrainSpec::reconstruction(args.iters);
-        spec.scale = args.scale;
-        spec.sh_degree = args.sh_degree;
-        spec.seed = args.seed;
-        spec.background = args.background;
+        spec.scale = args.run.scale;
+        spec.sh_degree = args.run.sh_degree;
+        spec.seed = args.run.seed;
+        spec.background = args.run.background;
         let (width, height) = (views[0].image.width, views[0].image.height);
         let train_views = views.len();
         let mut trainer = Trainer::new(spec, splats, views)?;
@@ -122,7 +107,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             heldout_psnr,
         })
     };
-    let bench = match args.threads {
+    let bench = match args.run.threads {
         Some(n) => rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build()

@@ -30,34 +30,14 @@ pub struct Args {
     pub out: PathBuf,
     #[arg(long, default_value_t = 7000)]
     pub iters: u32,
-    /// Image scale: 1, 2, 4, 8, 0.25 or w<width>.
-    #[arg(long, default_value = "1", value_parser = parse_scale)]
-    pub scale: ImageScale,
-    #[arg(long, default_value_t = 3)]
-    pub sh_degree: u32,
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Hold out every n-th view (when the dataset has no test split).
-    #[arg(long, default_value_t = 8)]
-    pub test_every: usize,
-    /// Hold out exactly these views (comma-separated names, e.g. 0049).
-    #[arg(long, value_delimiter = ',')]
-    pub test_views: Vec<String>,
-    /// Background: white, black or r,g,b in [0, 1].
-    #[arg(long, default_value = "black", value_parser = parse_background)]
-    pub background: Vec3,
-    /// Training threads (default: all cores, or RAYON_NUM_THREADS).
-    #[arg(long)]
-    pub threads: Option<usize>,
+    #[command(flatten)]
+    pub run: RunArgs,
     /// Held-out PSNR is evaluated every this many steps for curve.csv (0: only at the end).
     #[arg(long, default_value_t = 500)]
     pub eval_every: u32,
     /// Cap on the Gaussian count (adaptive density control stops growing there).
     #[arg(long)]
     pub max_gaussians: Option<usize>,
-    /// Random initial points when the dataset has none (NeRF-synthetic, instant-ngp).
-    #[arg(long, default_value_t = 100_000)]
-    pub init_points: usize,
     /// No progress bar (log lines only).
     #[arg(long)]
     pub quiet: bool,
@@ -77,6 +57,34 @@ pub struct Args {
     /// Learning rate of the label logits (label mode).
     #[arg(long, default_value_t = RunConfig::default().label_lr.unwrap_or(0.05))]
     pub label_lr: f32,
+}
+
+/// How a run reads its dataset and starts: shared by `train` and `bench`, so the two time the
+/// same run.
+#[derive(clap::Args, Debug)]
+pub struct RunArgs {
+    /// Image scale: 1, 2, 4, 8, 0.25 or w<width>.
+    #[arg(long, default_value = "1", value_parser = parse_scale)]
+    pub scale: ImageScale,
+    #[arg(long, default_value_t = 3)]
+    pub sh_degree: u32,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Hold out every n-th view (when the dataset has no test split).
+    #[arg(long, default_value_t = 8)]
+    pub test_every: usize,
+    /// Hold out exactly these views (comma-separated names, e.g. 0049).
+    #[arg(long, value_delimiter = ',')]
+    pub test_views: Vec<String>,
+    /// Background: white, black or r,g,b in [0, 1].
+    #[arg(long, default_value = "black", value_parser = parse_background)]
+    pub background: Vec3,
+    /// Training threads (default: all cores, or RAYON_NUM_THREADS).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Random initial points when the dataset has none (NeRF-synthetic, instant-ngp).
+    #[arg(long, default_value_t = 100_000)]
+    pub init_points: usize,
 }
 
 /// The palette with the user's `--colour` overrides.
@@ -202,28 +210,31 @@ pub fn print_line(bar: &ProgressBar, line: String) {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let dataset = open_dataset(&args.dataset, args.background)?;
+    let dataset = open_dataset(&args.dataset, args.run.background)?;
     for warning in &dataset.warnings {
         eprintln!("warning: {warning}");
     }
-    let (train_idx, test_idx) = split_views(&dataset, &holdout(args.test_every, &args.test_views))
-        .map_err(anyhow::Error::msg)?;
+    let (train_idx, test_idx) = split_views(
+        &dataset,
+        &holdout(args.run.test_every, &args.run.test_views),
+    )
+    .map_err(anyhow::Error::msg)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output folder {}", args.out.display()))?;
 
     let config = RunConfig {
         mode: args.mode,
         palette: palette(&args.colours)?,
-        scale: args.scale,
+        scale: args.run.scale,
         iterations: args.iters,
-        holdout: holdout(args.test_every, &args.test_views),
-        sh_degree: args.sh_degree,
-        seed: args.seed,
-        background: args.background,
+        holdout: holdout(args.run.test_every, &args.run.test_views),
+        sh_degree: args.run.sh_degree,
+        seed: args.run.seed,
+        background: args.run.background,
         label_weight: args.label_weight,
         label_pos_weight: args.label_pos_weight,
         label_lr: Some(args.label_lr),
-        random_points: args.init_points,
+        random_points: args.run.init_points,
         eval_every: args.eval_every,
         max_gaussians: args.max_gaussians,
     };
@@ -232,7 +243,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .iter()
         .map(|&i| dataset.views[i].name.clone())
         .collect();
-    let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
+    let threads = args.run.threads.unwrap_or_else(rayon::current_num_threads);
 
     let load_dataset = dataset.clone();
     let job = TrainJob::spawn_with(
@@ -244,7 +255,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Ok(run.setup)
         },
         JobOptions {
-            threads: args.threads,
+            threads: args.run.threads,
             snapshot_interval: None,
         },
     );
@@ -330,12 +341,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let peak_rss = peak_rss_mb();
     // Training-view PSNR on the final model (views reloaded: the job owned the first copies).
-    let train_views = load_views(&dataset, &train_idx, args.scale, false)?;
+    let train_views = load_views(&dataset, &train_idx, args.run.scale, false)?;
     let train_psnr = damage_twin::train::trainer::evaluate_views(
         &outcome.splats,
         &train_views,
-        args.background,
-        args.sh_degree,
+        args.run.background,
+        args.run.sh_degree,
     )
     .map(|s| s.psnr);
     let readout = DamageReadout {
@@ -345,18 +356,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let damage = damage_figures(
         &dataset,
         &test_idx,
-        args.scale,
+        args.run.scale,
         &outcome.splats,
         &readout,
-        args.background,
+        args.run.background,
     )?;
     let damage_train = damage_figures(
         &dataset,
         &train_idx,
-        args.scale,
+        args.run.scale,
         &outcome.splats,
         &readout,
-        args.background,
+        args.run.background,
     )?;
     let (width, height) = train_views
         .first()
