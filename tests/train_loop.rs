@@ -212,6 +212,8 @@ fn job_pauses_resumes_and_cancels() {
         JobOptions {
             threads: Some(1),
             snapshot_interval: Some(Duration::from_millis(50)),
+            // As the viewer runs it: worker and pool threads at a lower priority.
+            low_priority: true,
         },
     );
     let events = job.events().clone();

@@ -71,6 +71,9 @@ impl TrainingSession {
                     .unwrap_or(1),
             ),
             snapshot_interval: Some(Duration::from_millis(250)),
+            // Frames first: the viewport's renders (on a software driver, CPU threads too)
+            // must not wait for a training step.
+            low_priority: true,
         };
         let config = train_setup::run_config(&settings, palette, background);
         let job = TrainJob::spawn_with(
@@ -86,6 +89,12 @@ impl TrainingSession {
             outcome: None,
             started: Instant::now(),
         }
+    }
+
+    /// True while the run is training, so new models keep arriving (not preparing, paused,
+    /// finished or failed).
+    pub fn is_streaming(&self) -> bool {
+        matches!(self.status, RunStatus::Running | RunStatus::Stopping)
     }
 
     /// True until the run has finished or failed.

@@ -102,6 +102,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         JobOptions {
             threads: None,
             snapshot_interval: None,
+            low_priority: false,
         },
     );
     let bar = ProgressBar::new(u64::from(args.iterations)).with_style(

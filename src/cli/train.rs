@@ -257,6 +257,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         JobOptions {
             threads: args.run.threads,
             snapshot_interval: None,
+            low_priority: false,
         },
     );
     let bar = if args.quiet {

@@ -163,6 +163,7 @@ pub fn run_study(
                 JobOptions {
                     threads: config.threads,
                     snapshot_interval: None,
+                    low_priority: false,
                 },
             );
             let mut outcome = None;

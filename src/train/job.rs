@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::{Receiver, Sender, TryRecvError};
 
 use crate::splats::Splats;
+use crate::train::priority;
 use crate::train::spec::{TrainSpec, TrainView};
 use crate::train::trainer::{EvalScores, StageTimes, Trainer};
 
@@ -88,6 +89,9 @@ pub struct JobOptions {
     /// Minimum time between snapshots (DESIGN.md: at most ~10 per second); `None` sends only the
     /// final one (the CLI, which draws no splats).
     pub snapshot_interval: Option<Duration>,
+    /// Run the worker and its rayon threads at a lower scheduling priority
+    /// (`train::priority`): the viewer's frames come first, training takes the rest.
+    pub low_priority: bool,
 }
 
 impl Default for JobOptions {
@@ -95,6 +99,7 @@ impl Default for JobOptions {
         JobOptions {
             threads: None,
             snapshot_interval: Some(Duration::from_millis(100)),
+            low_priority: false,
         }
     }
 }
@@ -124,9 +129,22 @@ impl TrainJob {
         let worker = std::thread::Builder::new()
             .name("damage-twin-train".into())
             .spawn(move || {
+                if options.low_priority {
+                    priority::lower_current_thread_priority();
+                }
                 let body = || run_worker(setup, options, &event_tx, &control_rx);
-                let result = match options.threads {
-                    Some(n) => match rayon::ThreadPoolBuilder::new().num_threads(n).build() {
+                let mut pool = rayon::ThreadPoolBuilder::new();
+                if options.low_priority {
+                    pool = pool.start_handler(|_| priority::lower_current_thread_priority());
+                }
+                // The global pool is shared with the caller: a low-priority job gets its own.
+                let threads = match (options.threads, options.low_priority) {
+                    (Some(n), _) => Some(n),
+                    (None, true) => Some(rayon::current_num_threads()),
+                    (None, false) => None,
+                };
+                let result = match threads {
+                    Some(n) => match pool.num_threads(n).build() {
                         Ok(pool) => pool.install(body),
                         Err(e) => Err(format!("cannot start {n} training threads: {e}")),
                     },

@@ -7,6 +7,7 @@ pub mod densify;
 pub mod guards;
 pub mod job;
 pub mod loss;
+pub mod priority;
 pub mod schedule;
 pub mod spec;
 pub mod ssim;
