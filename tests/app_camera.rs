@@ -5,7 +5,7 @@ use damage_twin::app::camera_controller::{
     CameraController, CameraInput, NavMode, OrbitPose, estimate_up,
 };
 use damage_twin::app::overlay::{self, Segment, SegmentKind};
-use damage_twin::app::resolution::{AdaptiveResolution, scaled_size};
+use damage_twin::app::resolution::{AdaptiveResolution, FrameSample, scaled_size};
 use damage_twin::scene::{Camera, Intrinsics};
 use glam::{Vec2, Vec3};
 
@@ -231,11 +231,20 @@ fn world_up_is_estimated_from_level_cameras() {
     assert_eq!(estimate_up(&[]), Vec3::Z);
 }
 
+/// A frame that rendered splats (`rendered`) or only redrew the panels.
+fn frame(changing: bool, frame_ms: f32, rendered: bool) -> FrameSample {
+    FrameSample {
+        changing,
+        frame_ms,
+        last_frame_rendered: rendered,
+    }
+}
+
 #[test]
 fn resolution_drops_while_moving_slowly_and_recovers_at_rest() {
     let mut r = AdaptiveResolution::default();
     for _ in 0..30 {
-        r.update(true, 160.0, 40.0, 0.25);
+        r.update(frame(true, 160.0, true), 40.0, 0.25);
     }
     assert!(
         (r.scale() - 0.25).abs() < 1e-6,
@@ -243,16 +252,47 @@ fn resolution_drops_while_moving_slowly_and_recovers_at_rest() {
         r.scale()
     );
     for _ in 0..30 {
-        r.update(true, 20.0, 40.0, 0.25);
+        r.update(frame(true, 20.0, true), 40.0, 0.25);
     }
     assert!(r.scale() > 0.9, "fast frames raise it again: {}", r.scale());
-    r.update(true, 160.0, 40.0, 0.25);
+    r.update(frame(true, 160.0, true), 40.0, 0.25);
+    assert!(!r.settling(), "still changing");
+    r.update(frame(false, 10.0, false), 40.0, 0.25);
+    assert!(r.settling(), "at rest below full resolution");
     for _ in 0..5 {
-        r.update(false, 100.0, 40.0, 0.25);
+        r.update(frame(false, 100.0, false), 40.0, 0.25);
     }
     assert_eq!(r.scale(), 1.0);
+    assert!(!r.settling());
     assert_eq!(scaled_size(1000, 500, 0.25), (250, 125));
     assert_eq!(scaled_size(3, 3, 0.0001), (1, 1));
+}
+
+#[test]
+fn resolution_ignores_frames_that_did_not_render() {
+    // Training with a resting camera: a slow render every few frames, fast panel-only frames
+    // in between. Only the renders count, so the scale comes down and stays down.
+    let mut r = AdaptiveResolution::default();
+    for _ in 0..10 {
+        r.update(frame(true, 1000.0, true), 40.0, 0.25);
+        for _ in 0..5 {
+            r.update(frame(true, 15.0, false), 40.0, 0.25);
+        }
+    }
+    assert!(
+        (r.scale() - 0.25).abs() < 1e-6,
+        "panel-only frames must not raise it: {}",
+        r.scale()
+    );
+    assert!(
+        r.frame_ms() > 500.0,
+        "smoothed render time {}",
+        r.frame_ms()
+    );
+    // One full-resolution render twenty-five times over budget halves the scale at once.
+    let mut r = AdaptiveResolution::default();
+    r.update(frame(true, 1000.0, true), 40.0, 0.1);
+    assert!((r.scale() - 0.5).abs() < 1e-6, "{}", r.scale());
 }
 
 #[test]

@@ -1,10 +1,11 @@
 //! One frame of the whole app rendered with wgpu on the software driver (lavapipe), headless via
-//! egui_kittest: the splats must reach the viewport through the GPU paint callback. Asserts pixel
-//! statistics, not a snapshot (snapshots differ across Mesa versions, STACK.md).
+//! egui_kittest: the splats must reach the viewport through the GPU paint callback, and through
+//! the CPU worker that a software driver uses by default. Asserts pixel statistics, not a
+//! snapshot (snapshots differ across Mesa versions, STACK.md).
 
 use std::sync::Arc;
 
-use damage_twin::app::settings::Settings;
+use damage_twin::app::settings::{Settings, ViewportRenderer};
 use damage_twin::app::{Launch, TwinApp};
 use damage_twin::splats::Splats;
 use damage_twin::splats::model::SH_C0;
@@ -48,10 +49,11 @@ fn red_pixels(image: &image::RgbaImage, rect: egui::Rect) -> usize {
     n
 }
 
-#[test]
-fn app_frame_shows_splats_in_the_viewport() {
+/// Renders the app with the red cluster through `renderer` and checks the viewport's pixels.
+fn viewport_shows_splats(renderer: ViewportRenderer) {
     let settings = Settings {
         show_charts: false,
+        viewport_renderer: renderer,
         ..Settings::default()
     };
     let mut harness = egui_kittest::Harness::builder()
@@ -84,7 +86,17 @@ fn app_frame_shows_splats_in_the_viewport() {
         .state
         .set_splats(Arc::new(red_cluster()));
     harness.run_steps(2);
-    let image = harness.render().expect("renders with splats");
+    let mut image = harness.render().expect("renders with splats");
+    // The CPU worker's picture arrives a few frames later; the GPU pass draws in this frame.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    while renderer == ViewportRenderer::Cpu
+        && red_pixels(&image, rect) == 0
+        && std::time::Instant::now() < deadline
+    {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        harness.run_steps(1);
+        image = harness.render().expect("renders with splats");
+    }
     assert_eq!(harness.state().viewport.renderer_error(), None);
     let red = red_pixels(&image, rect);
     let area = (rect.width() * rect.height()) as usize;
@@ -98,4 +110,14 @@ fn app_frame_shows_splats_in_the_viewport() {
         ),
         0
     );
+}
+
+#[test]
+fn app_frame_shows_splats_in_the_viewport() {
+    viewport_shows_splats(ViewportRenderer::Gpu);
+}
+
+#[test]
+fn cpu_viewport_renderer_shows_splats_without_holding_up_frames() {
+    viewport_shows_splats(ViewportRenderer::Cpu);
 }

@@ -5,6 +5,7 @@
 pub mod camera_controller;
 pub mod chart_export;
 pub mod commands;
+pub mod cpu_view;
 pub mod damage_layer;
 pub mod demo;
 pub mod files;
@@ -223,7 +224,7 @@ impl eframe::App for TwinApp {
         if self.update_state() {
             // Progress arrives every step: a few repaints a second show it without taking the
             // training thread's core on a software renderer.
-            ctx.request_repaint_after(std::time::Duration::from_millis(100));
+            ctx.request_repaint_after(std::time::Duration::from_millis(250));
         }
         self.top_bar(ui);
 
@@ -262,8 +263,10 @@ impl eframe::App for TwinApp {
             self.viewport.ui(ui, &mut self.state, &mut self.commands);
         });
         if self.demo.is_some() || self.state.training.as_ref().is_some_and(|t| t.is_running()) {
-            // Keep polling the workers while they run (events arrive between input events).
-            ctx.request_repaint_after(std::time::Duration::from_millis(50));
+            // Keep polling the workers while they run (events arrive between input events), as
+            // often as snapshots come: on a software driver every UI frame costs CPU time that
+            // training needs.
+            ctx.request_repaint_after(std::time::Duration::from_millis(250));
         }
     }
 

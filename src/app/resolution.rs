@@ -1,16 +1,24 @@
-//! Adaptive render resolution: while the camera moves, the render scale drops until the measured
-//! frame time meets the target, so interaction stays fluid on a software driver; once the view
-//! rests it returns to full resolution. Pure arithmetic, driven by the viewport.
+//! Adaptive render resolution: while the picture keeps changing (the camera moves, or training
+//! streams new models), the render scale drops until a frame that renders splats meets the
+//! target time, so interaction stays fluid on a software driver; once both camera and model
+//! rest it returns to full resolution. Pure arithmetic, driven by the viewport.
 
-/// Seconds the camera must rest before full resolution comes back.
+/// Seconds the picture must rest before full resolution comes back.
 const SETTLE_SECONDS: f32 = 0.25;
+
+/// Per-frame correction limits. The downward one is wider: a full-resolution render on a
+/// software driver can take seconds, and each slow frame spent converging is felt.
+const MAX_DROP: f32 = 0.5;
+const MAX_RISE: f32 = 1.2;
 
 /// Picks the render scale (fraction of the viewport's pixel size) each frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AdaptiveResolution {
     scale: f32,
     rest_seconds: f32,
-    /// Smoothed frame time, milliseconds.
+    /// The last frame was neither moving nor training.
+    resting: bool,
+    /// Smoothed time of frames that rendered splats, milliseconds.
     frame_ms: f32,
 }
 
@@ -19,9 +27,22 @@ impl Default for AdaptiveResolution {
         AdaptiveResolution {
             scale: 1.0,
             rest_seconds: SETTLE_SECONDS,
+            resting: true,
             frame_ms: 0.0,
         }
     }
+}
+
+/// One frame as the controller sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameSample {
+    /// The camera moves or the model is being trained: renders must keep to the budget.
+    pub changing: bool,
+    /// Wall time of the last frame, milliseconds.
+    pub frame_ms: f32,
+    /// Whether the last frame rendered splats. Frames that only redrew the panels say nothing
+    /// about the render's cost; they only advance the rest timer.
+    pub last_frame_rendered: bool,
 }
 
 impl AdaptiveResolution {
@@ -29,37 +50,46 @@ impl AdaptiveResolution {
         self.scale
     }
 
-    /// Smoothed frame time the controller reacts to, milliseconds.
+    /// Smoothed time of rendering frames the controller reacts to, milliseconds.
     pub fn frame_ms(&self) -> f32 {
         self.frame_ms
     }
 
-    /// Feeds one frame: `moving` when the camera changed this frame, `frame_ms` the wall time of
-    /// the last frame. Render cost scales with pixel count, i.e. with scale², so the correction
-    /// is the square root of the time ratio, limited per frame to avoid oscillation.
-    pub fn update(&mut self, moving: bool, frame_ms: f32, target_ms: f32, min_scale: f32) -> f32 {
+    /// True while the scale is below full resolution and the picture rests, i.e. one more
+    /// frame after the settle time will bring full resolution back.
+    pub fn settling(&self) -> bool {
+        self.resting && self.scale < 1.0
+    }
+
+    /// Feeds one frame and returns the scale to render it at. Render cost scales with pixel
+    /// count, i.e. with scale², so the correction is the square root of the time ratio,
+    /// limited per frame to avoid oscillation.
+    pub fn update(&mut self, frame: FrameSample, target_ms: f32, min_scale: f32) -> f32 {
         let min_scale = if min_scale.is_finite() {
             min_scale.clamp(0.05, 1.0)
         } else {
             0.25
         };
-        if frame_ms.is_finite() && frame_ms > 0.0 {
+        let measured =
+            frame.last_frame_rendered && frame.frame_ms.is_finite() && frame.frame_ms > 0.0;
+        if measured {
             self.frame_ms = if self.frame_ms > 0.0 {
-                0.7 * self.frame_ms + 0.3 * frame_ms
+                0.7 * self.frame_ms + 0.3 * frame.frame_ms
             } else {
-                frame_ms
+                frame.frame_ms
             };
         }
-        if !moving {
-            self.rest_seconds += frame_ms.max(0.0) / 1000.0;
+        self.resting = !frame.changing;
+        if !frame.changing {
+            self.rest_seconds += frame.frame_ms.max(0.0) / 1000.0;
             if self.rest_seconds >= SETTLE_SECONDS {
                 self.scale = 1.0;
             }
             return self.scale;
         }
         self.rest_seconds = 0.0;
-        if self.frame_ms > 0.0 && target_ms > 0.0 {
-            let ratio = (target_ms / self.frame_ms).sqrt().clamp(0.7, 1.2);
+        if measured && self.frame_ms > 0.0 && target_ms > 0.0 {
+            let ratio = (target_ms / self.frame_ms).sqrt().clamp(MAX_DROP, MAX_RISE);
             self.scale = (self.scale * ratio).clamp(min_scale, 1.0);
         }
         self.scale

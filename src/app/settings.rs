@@ -26,6 +26,18 @@ pub enum CompareMode {
 }
 
 /// Damage layer display (issue 7 item 3): class colours over the render.
+/// Which renderer draws the splats in the viewport.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum ViewportRenderer {
+    /// The GPU pass on a hardware adapter; the CPU worker on a software driver (docs/APP.md).
+    #[default]
+    Auto,
+    /// The WGSL forward pass, drawn through the paint callback.
+    Gpu,
+    /// The CPU reference rasterizer on a worker thread.
+    Cpu,
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct DamageLayer {
@@ -101,6 +113,7 @@ pub struct Settings {
     pub target_frame_ms: f32,
     /// Smallest render scale the adaptive resolution may pick.
     pub min_render_scale: f32,
+    pub viewport_renderer: ViewportRenderer,
     pub compare_mode: CompareMode,
     /// Photo opacity in blend mode.
     pub compare_blend: f32,
@@ -126,6 +139,7 @@ impl Default for Settings {
             adaptive_resolution: true,
             target_frame_ms: 40.0,
             min_render_scale: 0.25,
+            viewport_renderer: ViewportRenderer::Auto,
             compare_mode: CompareMode::Swipe,
             compare_blend: 0.5,
             training: TrainingSettings::default(),

@@ -270,17 +270,28 @@ impl CallbackTrait for SplatCallback {
 pub struct SplatView {
     /// Set once `install` ran: the renderer's error slot, or why there is no renderer.
     installed: Option<Result<Arc<Mutex<Option<String>>>, String>>,
+    /// The last request queued, to tell frames that render from frames that reuse the picture.
+    last_request: Option<(UploadKey, Camera, GpuRenderSettings)>,
+    /// eframe's adapter is a CPU implementation (lavapipe, llvmpipe).
+    software: bool,
 }
 
 impl SplatView {
     /// Installs the renderer on eframe's device (once).
     pub fn install(&mut self, render_state: Option<&egui_wgpu::RenderState>) {
         if self.installed.is_none() {
+            self.software = render_state
+                .is_some_and(|rs| rs.adapter.get_info().device_type == wgpu::DeviceType::Cpu);
             self.installed = Some(match render_state {
                 Some(rs) => install(rs),
                 None => Err("no wgpu render state: the viewer needs eframe's wgpu backend".into()),
             });
         }
+    }
+
+    /// True when eframe draws through a software driver.
+    pub fn is_software(&self) -> bool {
+        self.software
     }
 
     /// True when splats can be drawn.
@@ -298,18 +309,19 @@ impl SplatView {
     }
 
     /// Queues the splats for drawing into `rect` with `camera` (its intrinsics set the render
-    /// resolution; the output is stretched over `rect`).
+    /// resolution; the output is stretched over `rect`). Returns true when this frame renders, false
+    /// when the request is the last one again and the picture is reused.
     pub fn paint(
-        &self,
+        &mut self,
         ui: &egui::Ui,
         rect: egui::Rect,
         camera: &Camera,
         splats: &Arc<Splats>,
         generation: u64,
         settings: &Settings,
-    ) {
+    ) -> bool {
         if !self.is_available() {
-            return;
+            return false;
         }
         let callback = SplatCallback {
             splats: splats.clone(),
@@ -325,7 +337,11 @@ impl SplatView {
                 ..GpuRenderSettings::default()
             },
         };
+        let request = (callback.key.clone(), callback.camera, callback.settings);
+        let renders = !splats.is_empty() && self.last_request.as_ref() != Some(&request);
+        self.last_request = Some(request);
         ui.painter()
             .add(egui_wgpu::Callback::new_paint_callback(rect, callback));
+        renders
     }
 }

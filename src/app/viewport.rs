@@ -9,9 +9,11 @@ use glam::{Vec2, Vec3};
 
 use crate::app::camera_controller::CameraInput;
 use crate::app::commands::Command;
+use crate::app::cpu_view::{CpuView, ViewRequest};
 use crate::app::overlay::{self, SegmentKind};
-use crate::app::resolution::{AdaptiveResolution, scaled_size};
+use crate::app::resolution::{AdaptiveResolution, FrameSample, scaled_size};
 use crate::app::settings::CompareMode;
+use crate::app::settings::ViewportRenderer;
 use crate::app::splat_view::SplatView;
 use crate::app::state::{AppState, Photo};
 use crate::scene::{Camera, RgbImage};
@@ -45,13 +47,19 @@ pub struct Viewport {
     /// Where the viewport was laid out last frame, in points.
     rect: Option<egui::Rect>,
     frame_log: FrameLog,
+    /// The last frame rendered splats (its time then measures the render).
+    rendered_last_frame: bool,
+    /// The CPU renderer's worker, started on first use (software drivers, or by choice).
+    cpu_view: Option<Result<CpuView, String>>,
 }
 
 /// With `DAMAGE_TWIN_FRAME_STATS=1`, prints frame-time statistics every 5 s to stderr (how the
-/// frame times in the docs were measured).
+/// frame times in the docs were measured): all frames, and separately the frames that rendered
+/// splats (the others only redrew the panels and reused the picture).
 struct FrameLog {
     enabled: bool,
     frames_ms: Vec<f32>,
+    render_frames_ms: Vec<f32>,
     scales: Vec<f32>,
     since: std::time::Instant,
 }
@@ -61,35 +69,59 @@ impl Default for FrameLog {
         FrameLog {
             enabled: std::env::var_os("DAMAGE_TWIN_FRAME_STATS").is_some_and(|v| v != "0"),
             frames_ms: Vec::new(),
+            render_frames_ms: Vec::new(),
             scales: Vec::new(),
             since: std::time::Instant::now(),
         }
     }
 }
 
+/// "n frames, median …, p95 …, max …" of a list of frame times.
+fn frame_summary(frames_ms: &[f32]) -> String {
+    if frames_ms.is_empty() {
+        return "0 frames".into();
+    }
+    let mut sorted = frames_ms.to_vec();
+    sorted.sort_by(f32::total_cmp);
+    let n = sorted.len();
+    format!(
+        "{n} frames, median {:.1} ms, p95 {:.1} ms, max {:.1} ms",
+        sorted[n / 2],
+        sorted[(n * 95 / 100).min(n - 1)],
+        sorted[n - 1],
+    )
+}
+
 impl FrameLog {
-    fn record(&mut self, frame_ms: f32, scale: f32) {
+    /// A CPU-worker render's own time (its pictures arrive between UI frames).
+    fn record_render(&mut self, render_ms: f32) {
+        if self.enabled && render_ms > 0.0 {
+            self.render_frames_ms.push(render_ms);
+        }
+    }
+
+    /// `frame_ms` is the last frame's time; `rendered` says whether that frame rendered splats.
+    fn record(&mut self, frame_ms: f32, scale: f32, rendered: bool) {
         if !self.enabled || !(frame_ms > 0.0) {
             return;
         }
         self.frames_ms.push(frame_ms);
+        if rendered {
+            self.render_frames_ms.push(frame_ms);
+        }
         self.scales.push(scale);
-        if self.since.elapsed().as_secs_f32() < 5.0 {
+        let seconds = self.since.elapsed().as_secs_f32();
+        if seconds < 5.0 {
             return;
         }
-        let mut sorted = self.frames_ms.clone();
-        sorted.sort_by(f32::total_cmp);
-        let n = sorted.len();
-        let mean = sorted.iter().sum::<f32>() / n as f32;
-        let mean_scale = self.scales.iter().sum::<f32>() / n as f32;
+        let mean_scale = self.scales.iter().sum::<f32>() / self.scales.len() as f32;
         eprintln!(
-            "frames: {n} in {:.1} s, mean {mean:.1} ms, median {:.1} ms, p95 {:.1} ms, max {:.1} ms, mean render scale {mean_scale:.2}",
-            self.since.elapsed().as_secs_f32(),
-            sorted[n / 2],
-            sorted[(n * 95 / 100).min(n - 1)],
-            sorted[n - 1],
+            "frames in {seconds:.1} s: all {}; splat renders {}; mean render scale {mean_scale:.2}",
+            frame_summary(&self.frames_ms),
+            frame_summary(&self.render_frames_ms),
         );
         self.frames_ms.clear();
+        self.render_frames_ms.clear();
         self.scales.clear();
         self.since = std::time::Instant::now();
     }
@@ -165,9 +197,24 @@ impl Viewport {
         self.rect.unwrap_or(egui::Rect::NOTHING)
     }
 
-    /// The GPU renderer's last error, or why there is none.
+    /// The GPU renderer's last error, or why there is none (or why the CPU renderer could not
+    /// start).
     pub fn renderer_error(&self) -> Option<String> {
-        self.splat_view.error()
+        match &self.cpu_view {
+            Some(Err(e)) => Some(e.clone()),
+            _ => self.splat_view.error(),
+        }
+    }
+
+    /// Whether the splats are drawn by the CPU worker rather than the GPU pass this frame.
+    pub fn uses_cpu_renderer(&self, choice: ViewportRenderer) -> bool {
+        match choice {
+            ViewportRenderer::Gpu => false,
+            ViewportRenderer::Cpu => true,
+            ViewportRenderer::Auto => {
+                self.splat_view.is_software() || !self.splat_view.is_available()
+            }
+        }
     }
 
     pub fn ui(&mut self, ui: &mut egui::Ui, state: &mut AppState, commands: &mut Vec<Command>) {
@@ -223,10 +270,29 @@ impl Viewport {
 
         let frame_ms = ui.input(|i| i.unstable_dt) * 1000.0;
         let moving = input.is_active() || state.camera.is_moving();
+        let use_cpu = self.uses_cpu_renderer(state.settings.viewport_renderer);
+        if use_cpu && self.cpu_view.is_none() {
+            self.cpu_view = Some(CpuView::start(ui.ctx()));
+        }
+        // The CPU worker's pictures arrive between frames and carry their own render time: the
+        // UI frames around them say nothing about what a render costs.
+        let (sample_ms, sample_rendered) = match (&mut self.cpu_view, use_cpu) {
+            (Some(Ok(view)), true) => match view.receive(ui.ctx()) {
+                Some(render_ms) => (render_ms, true),
+                None => (frame_ms, false),
+            },
+            _ => (frame_ms, self.rendered_last_frame),
+        };
+        // While training streams new models, every snapshot is a render: keep those within
+        // the budget too, or a resting camera would render each one at full resolution.
+        let training = state.training.as_ref().is_some_and(|t| t.is_streaming());
         let scale = if state.settings.adaptive_resolution {
             self.resolution.update(
-                moving,
-                frame_ms,
+                FrameSample {
+                    changing: moving || training,
+                    frame_ms: sample_ms,
+                    last_frame_rendered: sample_rendered,
+                },
                 state.settings.target_frame_ms,
                 state.settings.min_render_scale,
             )
@@ -238,22 +304,48 @@ impl Viewport {
         state.viewport_pixels = [px_w, px_h];
         let (rw, rh) = scaled_size(px_w, px_h, scale);
         let camera = state.view_camera(rw, rh);
-        self.frame_log.record(frame_ms, scale);
+        self.frame_log
+            .record(frame_ms, scale, self.rendered_last_frame);
+        if sample_rendered && use_cpu {
+            self.frame_log.record_render(sample_ms);
+        }
         state.frame_stats = FrameStats {
             frame_ms: self.resolution.frame_ms(),
             render_scale: scale,
             render_size: [rw, rh],
         };
 
+        self.rendered_last_frame = false;
         if let Some(splats) = &state.splats {
-            self.splat_view.paint(
-                ui,
-                render_rect,
-                &camera,
-                splats,
-                state.splats_generation,
-                &state.settings,
-            );
+            match &mut self.cpu_view {
+                Some(Ok(view)) if use_cpu => {
+                    view.request(
+                        ViewRequest {
+                            generation: state.splats_generation,
+                            camera,
+                            splat_scale: state.settings.splat_scale,
+                            damage: state.settings.damage.clone(),
+                            background: state.settings.background,
+                        },
+                        splats,
+                    );
+                    if let Some(texture) = view.texture() {
+                        let uv =
+                            egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0));
+                        painter.image(texture.id(), render_rect, uv, egui::Color32::WHITE);
+                    }
+                }
+                _ => {
+                    self.rendered_last_frame = self.splat_view.paint(
+                        ui,
+                        render_rect,
+                        &camera,
+                        splats,
+                        state.splats_generation,
+                        &state.settings,
+                    );
+                }
+            }
         } else {
             painter.text(
                 full.center(),
@@ -310,8 +402,14 @@ impl Viewport {
         }
 
         // Training snapshots repaint through the app's polling; only motion repaints at once.
-        if moving || self.resolution.scale() < 1.0 {
+        // A resting view asks for one more frame after the settle time to come back to full
+        // resolution, not for a stream of frames (on a software driver each one costs the
+        // trainer CPU time).
+        if moving {
             ui.ctx().request_repaint();
+        } else if self.resolution.settling() {
+            ui.ctx()
+                .request_repaint_after(std::time::Duration::from_millis(100));
         }
     }
 

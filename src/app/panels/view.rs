@@ -5,7 +5,7 @@
 use crate::app::camera_controller::NavMode;
 use crate::app::commands::Command;
 use crate::app::panels::edit_settings;
-use crate::app::settings::CompareMode;
+use crate::app::settings::{CompareMode, ViewportRenderer};
 use crate::app::state::AppState;
 use crate::damage::DamageClass;
 
@@ -41,6 +41,15 @@ impl ViewPanel {
                     ui.checkbox(&mut s.show_grid, "grid");
                     ui.checkbox(&mut s.show_frusta, "cameras");
                     ui.checkbox(&mut s.turntable, "turntable");
+                });
+                ui.end_row();
+                ui.label("Renderer");
+                ui.horizontal(|ui| {
+                    ui.selectable_value(&mut s.viewport_renderer, ViewportRenderer::Auto, "auto")
+                        .on_hover_text("GPU pass on a graphics card, CPU worker on a software driver");
+                    ui.selectable_value(&mut s.viewport_renderer, ViewportRenderer::Gpu, "GPU");
+                    ui.selectable_value(&mut s.viewport_renderer, ViewportRenderer::Cpu, "CPU")
+                        .on_hover_text("CPU reference rasterizer on a worker thread: never holds up the panels");
                 });
                 ui.end_row();
                 ui.label("Adaptive resolution");

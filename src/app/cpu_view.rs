@@ -1,0 +1,163 @@
+//! The viewport's renderer on a software GPU driver: the CPU reference rasterizer on a worker
+//! thread. On lavapipe the WGSL forward pass is several times slower than the CPU reference
+//! for the same frame (docs/APP.md), and because lavapipe executes a submission before the
+//! next present, a slow splat render also stalls every UI frame behind it. Here the UI thread
+//! only posts requests (the newest wins) and shows the last finished picture as a texture, so
+//! the panels stay fluid whatever a render costs. A real GPU keeps the paint-callback path.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use crossbeam_channel::{Receiver, Sender};
+
+use crate::app::damage_layer;
+use crate::app::settings::DamageLayer;
+use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
+use crate::scene::Camera;
+use crate::splats::Splats;
+
+/// What one picture shows; an identical request is not rendered again.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewRequest {
+    pub generation: u64,
+    pub camera: Camera,
+    pub splat_scale: f32,
+    pub damage: DamageLayer,
+    pub background: [f32; 3],
+}
+
+/// A finished picture.
+pub struct Picture {
+    pub request: ViewRequest,
+    pub image: egui::ColorImage,
+    /// Wall time of the render, milliseconds (what the adaptive resolution reacts to).
+    pub render_ms: f32,
+}
+
+/// The worker's input: the request and the model it refers to.
+struct Job {
+    request: ViewRequest,
+    splats: Arc<Splats>,
+}
+
+/// Client side, owned by the viewport.
+pub struct CpuView {
+    jobs: Sender<Job>,
+    pictures: Receiver<Picture>,
+    /// The last request posted (rendering or done).
+    posted: Option<ViewRequest>,
+    texture: Option<egui::TextureHandle>,
+}
+
+impl CpuView {
+    /// Starts the worker. `ctx` is asked to repaint when a picture is ready.
+    pub fn start(ctx: &egui::Context) -> Result<CpuView, String> {
+        let (jobs, job_rx) = crossbeam_channel::unbounded::<Job>();
+        let (picture_tx, pictures) = crossbeam_channel::unbounded();
+        let ctx = ctx.clone();
+        std::thread::Builder::new()
+            .name("damage-twin-view".into())
+            .spawn(move || render_loop(&job_rx, &picture_tx, &ctx))
+            .map_err(|e| format!("cannot start the view renderer thread: {e}"))?;
+        Ok(CpuView {
+            jobs,
+            pictures,
+            posted: None,
+            texture: None,
+        })
+    }
+
+    /// Posts `request` unless it is the last one posted. Returns true when it was posted.
+    pub fn request(&mut self, request: ViewRequest, splats: &Arc<Splats>) -> bool {
+        if self.posted.as_ref() == Some(&request) {
+            return false;
+        }
+        self.posted = Some(request.clone());
+        // The worker is gone only if it panicked; the viewport then shows the last picture.
+        self.jobs
+            .send(Job {
+                request,
+                splats: splats.clone(),
+            })
+            .is_ok()
+    }
+
+    /// Takes finished pictures into the texture; returns the newest one's render time.
+    pub fn receive(&mut self, ctx: &egui::Context) -> Option<f32> {
+        // Only the newest picture matters; older ones were overtaken while this frame waited.
+        let picture = self.pictures.try_iter().last()?;
+        let options = egui::TextureOptions::LINEAR;
+        match &mut self.texture {
+            Some(texture) => texture.set(picture.image, options),
+            None => self.texture = Some(ctx.load_texture("cpu view", picture.image, options)),
+        }
+        Some(picture.render_ms)
+    }
+
+    /// The last finished picture, if any.
+    pub fn texture(&self) -> Option<&egui::TextureHandle> {
+        self.texture.as_ref()
+    }
+}
+
+/// Renders the newest request, again and again, until the client is dropped.
+fn render_loop(jobs: &Receiver<Job>, pictures: &Sender<Picture>, ctx: &egui::Context) {
+    // One thread: on a 2-core machine the other core is left to the UI (whose frames the
+    // software driver also draws on the CPU) and to training.
+    match rayon::ThreadPoolBuilder::new().num_threads(1).build() {
+        Ok(pool) => pool.install(|| render_jobs(jobs, pictures, ctx)),
+        Err(_) => render_jobs(jobs, pictures, ctx),
+    }
+}
+
+fn render_jobs(jobs: &Receiver<Job>, pictures: &Sender<Picture>, ctx: &egui::Context) {
+    let mut rasterizer = Rasterizer::new();
+    let mut out = RenderOutput::default();
+    // The display model (splat scale, damage colours) is rebuilt only when its inputs change.
+    // It is a copy of the model even when nothing is changed, so the worker holds one model's
+    // memory more; it keeps no `Arc` of an old snapshot alive.
+    let mut display: Option<((u64, f32, DamageLayer), Splats)> = None;
+    while let Ok(mut job) = jobs.recv() {
+        // Skip requests that were overtaken while the last one rendered.
+        while let Ok(newer) = jobs.try_recv() {
+            job = newer;
+        }
+        let started = Instant::now();
+        let r = &job.request;
+        let key = (r.generation, r.splat_scale, r.damage.clone());
+        if display.as_ref().is_none_or(|(k, _)| *k != key) {
+            let shown = damage_layer::display_splats(&job.splats, r.splat_scale, &r.damage);
+            display = Some((key, shown.into_owned()));
+        }
+        let Some((_, shown)) = &display else {
+            continue;
+        };
+        let settings = RenderSettings::new(glam::Vec3::from_array(r.background), shown.sh_degree);
+        rasterizer.forward(shown, &r.camera, &settings, &mut out);
+        let image = to_color_image(&out);
+        let picture = Picture {
+            request: job.request,
+            image,
+            render_ms: started.elapsed().as_secs_f32() * 1000.0,
+        };
+        if pictures.send(picture).is_err() {
+            return;
+        }
+        ctx.request_repaint();
+    }
+}
+
+/// Linear RGB in [0, 1] (as the rasterizer blends) to an sRGB-free 8-bit texture, like the GPU
+/// path's `Rgba8Unorm` output.
+fn to_color_image(out: &RenderOutput) -> egui::ColorImage {
+    let pixels = (out.width * out.height) as usize;
+    let mut rgba = Vec::with_capacity(pixels * 4);
+    for p in 0..pixels {
+        for c in 0..3 {
+            let v = out.color.get(p * 3 + c).copied().unwrap_or(0.0);
+            rgba.push((v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
+        }
+        rgba.push(255);
+    }
+    egui::ColorImage::from_rgba_unmultiplied([out.width as usize, out.height as usize], &rgba)
+}
