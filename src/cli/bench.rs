@@ -107,14 +107,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             heldout_psnr,
         })
     };
-    let bench = match args.run.threads {
-        Some(n) => rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build()
-            .context("starting the thread pool")?
-            .install(body)?,
-        None => body()?,
-    };
+    // In a pool of its own like a training job (`TrainJob::spawn_with`), so the bench times
+    // the same thread setup; 0 threads means the default (RAYON_NUM_THREADS or every core).
+    let bench = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.run.threads.unwrap_or(0))
+        .build()
+        .context("starting the thread pool")?
+        .install(body)?;
     println!("{}", serde_json::to_string_pretty(&bench)?);
     Ok(())
 }

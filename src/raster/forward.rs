@@ -324,7 +324,7 @@ pub(crate) fn rasterize(
     segments: &mut SegmentStore,
 ) {
     let stride = state_channels(labels) * TILE_PIXELS;
-    state.clear();
+    // Sized only: every tile zeroes its own slice first (`rasterize_tile_impl`).
     state.resize(bins.tile_count() * stride, 0.0);
     segments.prepare(projected, bins, settings.alpha_threshold);
     state

@@ -54,6 +54,12 @@ pub(crate) fn ewa_jacobian(p: Vec3, frame: &CameraFrame) -> (Vec3, Vec3) {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct CameraSpace {
     pub p_cam: Vec3,
+    /// The rotation's length, the unit quaternion and its matrix, and `exp(log_scale)`: the
+    /// backward reuses them rather than computing them again.
+    pub norm: f32,
+    pub q: Quat,
+    pub rot: Mat3,
+    pub scale: Vec3,
     /// `W · R · S`: the camera-space covariance is `ws · wsᵀ`.
     pub ws: Mat3,
     pub j0: Vec3,
@@ -82,7 +88,8 @@ pub(crate) fn camera_space(
     if !(norm2 > 0.0) {
         return None;
     }
-    let q = rotation * (1.0 / norm2.sqrt());
+    let norm = norm2.sqrt();
+    let q = rotation * (1.0 / norm);
     let r = rotation_matrix(q);
     let s = Vec3::new(log_scale.x.exp(), log_scale.y.exp(), log_scale.z.exp());
     let m = Mat3::from_cols(r.x_axis * s.x, r.y_axis * s.y, r.z_axis * s.z);
@@ -94,6 +101,10 @@ pub(crate) fn camera_space(
     let cov2d = Vec3::new(j0.dot(t0) + COV2D_BLUR, j0.dot(t1), j1.dot(t1) + COV2D_BLUR);
     Some(CameraSpace {
         p_cam,
+        norm,
+        q,
+        rot: r,
+        scale: s,
         ws,
         j0,
         j1,

@@ -5,10 +5,10 @@
 use glam::{Mat3, Vec3, Vec4};
 use rayon::prelude::*;
 
-use super::project::{camera_space, rotation_matrix};
+use super::project::camera_space;
 use super::{CameraFrame, Projected, RenderSettings, ScreenGrads, SplatGrads};
 use crate::splats::Splats;
-use crate::splats::sh::{eval_sh, eval_sh_backward};
+use crate::splats::sh::{eval_sh_backward_from_basis, eval_sh_from_basis, sh_basis};
 
 const CHUNK: usize = 1024;
 
@@ -82,20 +82,21 @@ fn backward_one(
     let dir = offset / dist;
     let k = splats.sh_coeffs() * 3;
     let coeffs = &splats.sh[g * k..(g + 1) * k];
-    let raw = eval_sh(sh_degree, coeffs, dir);
+    let mut basis = [0.0f32; 16];
+    sh_basis(sh_degree, dir, &mut basis);
+    let raw = eval_sh_from_basis(sh_degree, &basis, coeffs);
     let pass = |r: f32, v: f32| if r + 0.5 >= 0.0 { v } else { 0.0 };
     let v_raw = Vec3::new(
         pass(raw.x, v_color.x),
         pass(raw.y, v_color.y),
         pass(raw.z, v_color.z),
     );
-    let v_dir = eval_sh_backward(sh_degree, coeffs, dir, v_raw, v_sh);
+    let v_dir = eval_sh_backward_from_basis(sh_degree, &basis, coeffs, dir, v_raw, v_sh);
     if settings.sh_direction_grad {
         *v_mean += (v_dir - dir * dir.dot(v_dir)) / dist;
     }
 
-    let rotation = splats.rotations[g];
-    let Some(cs) = camera_space(mean, splats.log_scales[g], rotation, frame) else {
+    let Some(cs) = camera_space(mean, splats.log_scales[g], splats.rotations[g], frame) else {
         return;
     };
     // Conic = inverse(cov2d): dL/dcov2d = -C V C, V the symmetric gradient of the conic matrix
@@ -119,11 +120,7 @@ fn backward_one(
     // Σ_cam = ws wsᵀ, ws = W R S.
     let v_ws = v_cov_cam * cs.ws * 2.0;
     let v_m = frame.world_to_camera.transpose() * v_ws;
-    let norm = rotation.length();
-    let q = rotation * (1.0 / norm);
-    let r = rotation_matrix(q);
-    let ls = splats.log_scales[g];
-    let s = Vec3::new(ls.x.exp(), ls.y.exp(), ls.z.exp());
+    let (norm, q, r, s) = (cs.norm, cs.q, cs.rot, cs.scale);
     let v_r = Mat3::from_cols(v_m.x_axis * s.x, v_m.y_axis * s.y, v_m.z_axis * s.z);
     let v_s = Vec3::new(
         r.x_axis.dot(v_m.x_axis),

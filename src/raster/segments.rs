@@ -23,6 +23,8 @@ pub(crate) struct SegmentStore {
     /// per tile in replay order (intersection, then segment bit).
     vis: Vec<f32>,
     counts: Vec<usize>,
+    /// [`power_limit`] per Gaussian: once per Gaussian rather than once per intersection.
+    power_max: Vec<f32>,
 }
 
 impl SegmentStore {
@@ -30,6 +32,13 @@ impl SegmentStore {
     /// falloffs (a per-tile growing buffer kept the worst case of every view, twice over).
     pub fn prepare(&mut self, projected: &Projected, bins: &TileBins, alpha_threshold: f32) {
         let tiles = bins.tile_count();
+        self.power_max.clear();
+        self.power_max.resize(projected.opacities.len(), 0.0);
+        self.power_max
+            .par_iter_mut()
+            .zip(projected.opacities.par_iter())
+            .for_each(|(p, &opacity)| *p = power_limit(opacity, alpha_threshold));
+        let power_max = &self.power_max;
         self.masks.clear();
         self.masks.resize(bins.gaussian_ids.len(), 0);
         self.counts.clear();
@@ -39,7 +48,7 @@ impl SegmentStore {
             .zip(self.counts.par_iter_mut())
             .enumerate()
             .for_each(|(tile, (masks, count))| {
-                *count = tile_masks(tile, masks, projected, bins, alpha_threshold) * LANES;
+                *count = tile_masks(tile, masks, projected, bins, power_max) * LANES;
             });
         self.offsets.clear();
         let mut total = 0;
@@ -81,7 +90,7 @@ fn tile_masks_impl(
     masks: &mut [u32],
     projected: &Projected,
     bins: &TileBins,
-    alpha_threshold: f32,
+    power_max: &[f32],
 ) -> usize {
     let tiles_x = bins.tiles_x as usize;
     let (ox, oy) = (
@@ -94,8 +103,7 @@ fn tile_masks_impl(
     for (mask, &g) in masks.iter_mut().zip(ids) {
         let g = g as usize;
         let sp = Splat2d::load(projected, g);
-        let power_max = power_limit(sp.opacity, alpha_threshold);
-        *mask = segment_mask(&sp, power_max, footprint(projected, g, ox, oy), ox, oy);
+        *mask = segment_mask(&sp, power_max[g], footprint(projected, g, ox, oy), ox, oy);
         segments += mask.count_ones() as usize;
     }
     segments
@@ -108,9 +116,9 @@ fn tile_masks_avx2(
     masks: &mut [u32],
     projected: &Projected,
     bins: &TileBins,
-    alpha_threshold: f32,
+    power_max: &[f32],
 ) -> usize {
-    tile_masks_impl(tile, masks, projected, bins, alpha_threshold)
+    tile_masks_impl(tile, masks, projected, bins, power_max)
 }
 
 /// [`tile_masks_impl`] with AVX2 where the CPU has it: the 16-row mask then vectorises and
@@ -120,14 +128,14 @@ fn tile_masks(
     masks: &mut [u32],
     projected: &Projected,
     bins: &TileBins,
-    alpha_threshold: f32,
+    power_max: &[f32],
 ) -> usize {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { tile_masks_avx2(tile, masks, projected, bins, alpha_threshold) };
+        return unsafe { tile_masks_avx2(tile, masks, projected, bins, power_max) };
     }
-    tile_masks_impl(tile, masks, projected, bins, alpha_threshold)
+    tile_masks_impl(tile, masks, projected, bins, power_max)
 }
 
 /// The pixel rows `[y0, y1)` and columns `[x0, x1)` of a tile whose centres lie in a Gaussian's

@@ -100,6 +100,12 @@ fn sh_basis_derivatives(degree: u32, dir: Vec3, out: &mut [Vec3; 16]) {
 pub fn eval_sh(degree: u32, coeffs: &[f32], dir: Vec3) -> Vec3 {
     let mut basis = [0.0f32; 16];
     sh_basis(degree, dir, &mut basis);
+    eval_sh_from_basis(degree, &basis, coeffs)
+}
+
+/// [`eval_sh`] from basis values `sh_basis` already wrote (the backward needs them twice).
+#[inline]
+pub fn eval_sh_from_basis(degree: u32, basis: &[f32; 16], coeffs: &[f32]) -> Vec3 {
     let n = super::model::sh_coeffs_for_degree(degree);
     let mut sum = Vec3::ZERO;
     for (k, b) in basis[..n].iter().enumerate() {
@@ -120,6 +126,19 @@ pub fn eval_sh_backward(
 ) -> Vec3 {
     let mut basis = [0.0f32; 16];
     sh_basis(degree, dir, &mut basis);
+    eval_sh_backward_from_basis(degree, &basis, coeffs, dir, v_sum, v_coeffs)
+}
+
+/// [`eval_sh_backward`] from the basis values of `dir` (`sh_basis`).
+#[inline]
+pub fn eval_sh_backward_from_basis(
+    degree: u32,
+    basis: &[f32; 16],
+    coeffs: &[f32],
+    dir: Vec3,
+    v_sum: Vec3,
+    v_coeffs: &mut [f32],
+) -> Vec3 {
     let n = super::model::sh_coeffs_for_degree(degree);
     for (k, b) in basis[..n].iter().enumerate() {
         v_coeffs[k * 3] += b * v_sum.x;
