@@ -6,7 +6,7 @@
 //! the panels stay fluid whatever a render costs. A real GPU keeps the paint-callback path.
 
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender};
 
@@ -15,6 +15,11 @@ use crate::app::settings::DamageLayer;
 use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
 use crate::scene::Camera;
 use crate::splats::Splats;
+
+/// While only the model changes (training under a resting camera), the picture refreshes at
+/// most this often: each render takes CPU time from training, and a new picture every snapshot
+/// (4 per second) took most of a core at rest on the 2-core machine.
+const MODEL_REFRESH: Duration = Duration::from_secs(1);
 
 /// What one picture shows; an identical request is not rendered again.
 #[derive(Clone, Debug, PartialEq)]
@@ -44,8 +49,9 @@ struct Job {
 pub struct CpuView {
     jobs: Sender<Job>,
     pictures: Receiver<Picture>,
-    /// The last request posted (rendering or done).
+    /// The last request posted (rendering or done), and when.
     posted: Option<ViewRequest>,
+    posted_at: Instant,
     texture: Option<egui::TextureHandle>,
 }
 
@@ -63,16 +69,30 @@ impl CpuView {
             jobs,
             pictures,
             posted: None,
+            posted_at: Instant::now(),
             texture: None,
         })
     }
 
-    /// Posts `request` unless it is the last one posted. Returns true when it was posted.
+    /// Posts `request` unless it is the last one posted, or differs from it only by a newer
+    /// model less than [`MODEL_REFRESH`] after it (a later frame posts it). Returns true when it
+    /// was posted.
     pub fn request(&mut self, request: ViewRequest, splats: &Arc<Splats>) -> bool {
-        if self.posted.as_ref() == Some(&request) {
-            return false;
+        if let Some(posted) = &self.posted {
+            let same_view = *posted
+                == ViewRequest {
+                    generation: posted.generation,
+                    ..request.clone()
+                };
+            if same_view
+                && (posted.generation == request.generation
+                    || self.posted_at.elapsed() < MODEL_REFRESH)
+            {
+                return false;
+            }
         }
         self.posted = Some(request.clone());
+        self.posted_at = Instant::now();
         // The worker is gone only if it panicked; the viewport then shows the last picture.
         self.jobs
             .send(Job {

@@ -61,6 +61,8 @@ struct FrameLog {
     frames_ms: Vec<f32>,
     render_frames_ms: Vec<f32>,
     scales: Vec<f32>,
+    /// Why egui repainted ("file:line reason" → frames), to find what keeps frames coming.
+    repaint_causes: std::collections::BTreeMap<String, usize>,
     since: std::time::Instant,
 }
 
@@ -71,6 +73,7 @@ impl Default for FrameLog {
             frames_ms: Vec::new(),
             render_frames_ms: Vec::new(),
             scales: Vec::new(),
+            repaint_causes: std::collections::BTreeMap::new(),
             since: std::time::Instant::now(),
         }
     }
@@ -101,9 +104,12 @@ impl FrameLog {
     }
 
     /// `frame_ms` is the last frame's time; `rendered` says whether that frame rendered splats.
-    fn record(&mut self, frame_ms: f32, scale: f32, rendered: bool) {
+    fn record(&mut self, ctx: &egui::Context, frame_ms: f32, scale: f32, rendered: bool) {
         if !self.enabled || !(frame_ms > 0.0) {
             return;
+        }
+        for cause in ctx.repaint_causes() {
+            *self.repaint_causes.entry(cause.to_string()).or_default() += 1;
         }
         self.frames_ms.push(frame_ms);
         if rendered {
@@ -120,6 +126,13 @@ impl FrameLog {
             frame_summary(&self.frames_ms),
             frame_summary(&self.render_frames_ms),
         );
+        let mut causes: Vec<_> = std::mem::take(&mut self.repaint_causes)
+            .into_iter()
+            .collect();
+        causes.sort_by_key(|(_, frames)| std::cmp::Reverse(*frames));
+        for (cause, frames) in causes.iter().take(4) {
+            eprintln!("  repaint cause ({frames} frames): {cause}");
+        }
         self.frames_ms.clear();
         self.render_frames_ms.clear();
         self.scales.clear();
@@ -305,7 +318,7 @@ impl Viewport {
         let (rw, rh) = scaled_size(px_w, px_h, scale);
         let camera = state.view_camera(rw, rh);
         self.frame_log
-            .record(frame_ms, scale, self.rendered_last_frame);
+            .record(ui.ctx(), frame_ms, scale, self.rendered_last_frame);
         if sample_rendered && use_cpu {
             self.frame_log.record_render(sample_ms);
         }

@@ -141,9 +141,10 @@ impl TrainingPanel {
         ui.add(
             egui::ProgressBar::new(session.fraction())
                 .text(text)
-                .animate(
-                    session.status == RunStatus::Running || session.status == RunStatus::Preparing,
-                ),
+                // Only while preparing, when there is no progress to show: an animated bar
+                // repaints every frame, and on a software driver those frames took about a core
+                // from training.
+                .animate(session.status == RunStatus::Preparing),
         );
     }
 }
