@@ -53,6 +53,7 @@ pub struct CpuView {
     posted: Option<ViewRequest>,
     posted_at: Instant,
     texture: Option<egui::TextureHandle>,
+    ctx: egui::Context,
 }
 
 impl CpuView {
@@ -60,10 +61,10 @@ impl CpuView {
     pub fn start(ctx: &egui::Context) -> Result<CpuView, String> {
         let (jobs, job_rx) = crossbeam_channel::unbounded::<Job>();
         let (picture_tx, pictures) = crossbeam_channel::unbounded();
-        let ctx = ctx.clone();
+        let worker_ctx = ctx.clone();
         std::thread::Builder::new()
             .name("damage-twin-view".into())
-            .spawn(move || render_loop(&job_rx, &picture_tx, &ctx))
+            .spawn(move || render_loop(&job_rx, &picture_tx, &worker_ctx))
             .map_err(|e| format!("cannot start the view renderer thread: {e}"))?;
         Ok(CpuView {
             jobs,
@@ -71,6 +72,7 @@ impl CpuView {
             posted: None,
             posted_at: Instant::now(),
             texture: None,
+            ctx: ctx.clone(),
         })
     }
 
@@ -84,10 +86,13 @@ impl CpuView {
                     generation: posted.generation,
                     ..request.clone()
                 };
-            if same_view
-                && (posted.generation == request.generation
-                    || self.posted_at.elapsed() < MODEL_REFRESH)
-            {
+            if same_view && posted.generation == request.generation {
+                return false;
+            }
+            let since = self.posted_at.elapsed();
+            if same_view && since < MODEL_REFRESH {
+                // Come back for it: after training ends nothing else may repaint.
+                self.ctx.request_repaint_after(MODEL_REFRESH - since);
                 return false;
             }
         }
@@ -180,4 +185,54 @@ fn to_color_image(out: &RenderOutput) -> egui::ColorImage {
         rgba.push(255);
     }
     egui::ColorImage::from_rgba_unmultiplied([out.width as usize, out.height as usize], &rgba)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Intrinsics;
+    use glam::Vec3;
+
+    fn request(generation: u64, eye_x: f32) -> ViewRequest {
+        let k = Intrinsics {
+            width: 16,
+            height: 12,
+            fx: 16.0,
+            fy: 16.0,
+            cx: 8.0,
+            cy: 6.0,
+        };
+        ViewRequest {
+            generation,
+            camera: Camera::look_at(k, Vec3::new(eye_x, -4.0, 0.0), Vec3::ZERO, Vec3::Z),
+            splat_scale: 1.0,
+            damage: DamageLayer::default(),
+            background: [0.2, 0.3, 0.4],
+        }
+    }
+
+    #[test]
+    fn posts_new_views_at_once_and_new_models_at_most_once_a_second() {
+        let ctx = egui::Context::default();
+        let mut view = CpuView::start(&ctx).expect("worker");
+        let splats = Arc::new(Splats::empty(0, 0));
+        assert!(view.request(request(1, 0.0), &splats), "first request");
+        assert!(!view.request(request(1, 0.0), &splats), "the same again");
+        assert!(
+            !view.request(request(2, 0.0), &splats),
+            "a newer model, too soon"
+        );
+        assert!(
+            view.request(request(2, 1.0), &splats),
+            "a new view, at once"
+        );
+        // The worker renders the background of an empty model.
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while view.receive(&ctx).is_none() {
+            assert!(Instant::now() < deadline, "no picture");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let texture = view.texture().expect("texture");
+        assert_eq!(texture.size(), [16, 12]);
+    }
 }
