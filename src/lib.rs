@@ -11,6 +11,7 @@ pub mod metrics;
 pub mod raster;
 pub mod report;
 pub mod scene;
+mod simd;
 pub mod splats;
 pub mod synth;
 pub mod train;

@@ -9,6 +9,7 @@ use super::bin::TileBins;
 use super::fast_exp::fast_exp;
 use super::segments::SegmentStore;
 use super::{Projected, RenderOutput, RenderSettings, TILE_PIXELS, TILE_SIZE, TRANSMITTANCE_MIN};
+use crate::simd::avx2_dispatch;
 
 /// Pixels evaluated together (one AVX register of f32).
 pub(crate) const LANES: usize = 8;
@@ -242,75 +243,20 @@ pub(crate) fn any_live(t: &[f32]) -> bool {
     t.iter().fold(false, |any, &t| any | (t > 0.0))
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[allow(clippy::too_many_arguments)]
-fn rasterize_tile_avx2(
-    tile: usize,
-    state: &mut [f32],
-    masks: &mut [u32],
-    seg_vis: &mut [f32],
-    projected: &Projected,
-    bins: &TileBins,
-    labels: usize,
-    alpha_max: f32,
-    alpha_threshold: f32,
-) {
-    rasterize_tile_impl(
-        tile,
-        state,
-        masks,
-        seg_vis,
-        projected,
-        bins,
-        labels,
-        alpha_max,
-        alpha_threshold,
+avx2_dispatch!(
+    /// [`rasterize_tile_impl`] with AVX2 where the CPU has it.
+    rasterize_tile => rasterize_tile_impl(
+        tile: usize,
+        state: &mut [f32],
+        masks: &mut [u32],
+        seg_vis: &mut [f32],
+        projected: &Projected,
+        bins: &TileBins,
+        labels: usize,
+        alpha_max: f32,
+        alpha_threshold: f32,
     )
-}
-
-#[allow(clippy::too_many_arguments)]
-fn rasterize_tile(
-    tile: usize,
-    state: &mut [f32],
-    masks: &mut [u32],
-    seg_vis: &mut [f32],
-    projected: &Projected,
-    bins: &TileBins,
-    labels: usize,
-    alpha_max: f32,
-    alpha_threshold: f32,
-) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        unsafe {
-            rasterize_tile_avx2(
-                tile,
-                state,
-                masks,
-                seg_vis,
-                projected,
-                bins,
-                labels,
-                alpha_max,
-                alpha_threshold,
-            )
-        };
-        return;
-    }
-    rasterize_tile_impl(
-        tile,
-        state,
-        masks,
-        seg_vis,
-        projected,
-        bins,
-        labels,
-        alpha_max,
-        alpha_threshold,
-    )
-}
+);
 
 /// Blends every tile (rayon over tiles) into the tile-major `state`, and leaves in `segments`
 /// what the backward replays: per intersection the row segments it blended into, per tile

@@ -15,6 +15,7 @@ use super::{
     MAX_LABEL_CHANNELS, PixelGrads, Projected, RenderSettings, ScreenGrads, TILE_PIXELS, TILE_SIZE,
     TRANSMITTANCE_MIN,
 };
+use crate::simd::avx2_dispatch;
 
 const TS: usize = TILE_SIZE as usize;
 
@@ -261,10 +262,10 @@ fn backward_tile_impl<const HAS_LABELS: bool>(
     }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+/// [`backward_tile_impl`] with the label sums compiled in only when there are label channels.
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn backward_tile_avx2(
+fn backward_tile_kernel(
     tile: usize,
     out: &mut [f32],
     masks: &[u32],
@@ -286,38 +287,20 @@ fn backward_tile_avx2(
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn backward_tile(
-    tile: usize,
-    out: &mut [f32],
-    masks: &[u32],
-    seg_vis: &[f32],
-    projected: &Projected,
-    bins: &TileBins,
-    inputs: &TileInputs,
-    labels: usize,
-    alpha_max: f32,
-) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        unsafe {
-            backward_tile_avx2(
-                tile, out, masks, seg_vis, projected, bins, inputs, labels, alpha_max,
-            )
-        };
-        return;
-    }
-    if labels > 0 {
-        backward_tile_impl::<true>(
-            tile, out, masks, seg_vis, projected, bins, inputs, labels, alpha_max,
-        )
-    } else {
-        backward_tile_impl::<false>(
-            tile, out, masks, seg_vis, projected, bins, inputs, labels, alpha_max,
-        )
-    }
-}
+avx2_dispatch!(
+    /// [`backward_tile_kernel`] with AVX2 where the CPU has it.
+    backward_tile => backward_tile_kernel(
+        tile: usize,
+        out: &mut [f32],
+        masks: &[u32],
+        seg_vis: &[f32],
+        projected: &Projected,
+        bins: &TileBins,
+        inputs: &TileInputs,
+        labels: usize,
+        alpha_max: f32,
+    )
+);
 
 /// Screen-space gradients per intersection (rayon over tiles), reduced per Gaussian into
 /// `gauss_grads` (`grad_stride(L)` per Gaussian) in intersection order.

@@ -7,6 +7,7 @@ use rayon::prelude::*;
 use super::bin::TileBins;
 use super::forward::{LANES, Splat2d};
 use super::{Projected, TILE_SIZE};
+use crate::simd::avx2_dispatch;
 
 const TS: usize = TILE_SIZE as usize;
 
@@ -109,34 +110,17 @@ fn tile_masks_impl(
     segments
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn tile_masks_avx2(
-    tile: usize,
-    masks: &mut [u32],
-    projected: &Projected,
-    bins: &TileBins,
-    power_max: &[f32],
-) -> usize {
-    tile_masks_impl(tile, masks, projected, bins, power_max)
-}
-
-/// [`tile_masks_impl`] with AVX2 where the CPU has it: the 16-row mask then vectorises and
-/// rounds in registers (baseline x86-64 has no vector floor/ceil and calls libm per row).
-fn tile_masks(
-    tile: usize,
-    masks: &mut [u32],
-    projected: &Projected,
-    bins: &TileBins,
-    power_max: &[f32],
-) -> usize {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { tile_masks_avx2(tile, masks, projected, bins, power_max) };
-    }
-    tile_masks_impl(tile, masks, projected, bins, power_max)
-}
+avx2_dispatch!(
+    /// [`tile_masks_impl`] with AVX2 where the CPU has it: the 16-row mask then vectorises and
+    /// rounds in registers (baseline x86-64 has no vector floor/ceil and calls libm per row).
+    tile_masks => tile_masks_impl(
+        tile: usize,
+        masks: &mut [u32],
+        projected: &Projected,
+        bins: &TileBins,
+        power_max: &[f32],
+    ) -> usize
+);
 
 /// The pixel rows `[y0, y1)` and columns `[x0, x1)` of a tile whose centres lie in a Gaussian's
 /// extent box (`origin` is the tile's top-left pixel).

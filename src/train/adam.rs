@@ -7,6 +7,7 @@ use rayon::prelude::*;
 
 use super::schedule::ExponentialLr;
 use crate::raster::MAX_LABEL_CHANNELS;
+use crate::simd::avx2_dispatch;
 use crate::splats::Splats;
 
 /// The trainable parameter groups, in the order of every `[_; 7]` array in this module.
@@ -314,45 +315,21 @@ fn update_chunk_impl(
     }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[allow(clippy::too_many_arguments)]
-fn update_chunk_avx2(
-    p: &mut [f32],
-    g: &[f32],
-    m: &mut [f32],
-    v: &mut [f32],
-    first: usize,
-    stride: usize,
-    offset: usize,
-    len: usize,
-    u: &Update,
-) {
-    update_chunk_impl(p, g, m, v, first, stride, offset, len, u)
-}
-
-/// [`update_chunk_impl`] with AVX2 where the CPU has it: 8 square roots and divisions per
-/// instruction instead of 4. Both are correctly rounded, so the bits are the same.
-#[allow(clippy::too_many_arguments)]
-fn update_chunk(
-    p: &mut [f32],
-    g: &[f32],
-    m: &mut [f32],
-    v: &mut [f32],
-    first: usize,
-    stride: usize,
-    offset: usize,
-    len: usize,
-    u: &Update,
-) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        unsafe { update_chunk_avx2(p, g, m, v, first, stride, offset, len, u) };
-        return;
-    }
-    update_chunk_impl(p, g, m, v, first, stride, offset, len, u)
-}
+avx2_dispatch!(
+    /// [`update_chunk_impl`] with AVX2 where the CPU has it: 8 square roots and divisions per
+    /// instruction instead of 4. Both are correctly rounded, so the bits are the same.
+    update_chunk => update_chunk_impl(
+        p: &mut [f32],
+        g: &[f32],
+        m: &mut [f32],
+        v: &mut [f32],
+        first: usize,
+        stride: usize,
+        offset: usize,
+        len: usize,
+        u: &Update,
+    )
+);
 
 /// Updates one group stored with `stride` values per Gaussian of which `offset..offset+len`
 /// belong to the group (`len == m.per_gaussian`); `grads` has the parameters' layout.

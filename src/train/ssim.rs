@@ -6,6 +6,8 @@
 
 use rayon::prelude::*;
 
+use crate::simd::avx2_dispatch;
+
 /// Window side and radius (3DGS `window_size = 11`).
 pub const SSIM_WINDOW: usize = 11;
 const RADIUS: usize = SSIM_WINDOW / 2;
@@ -89,30 +91,6 @@ impl SsimWorkspace {
         self.ssim_map = vec![0.0; rows * width];
         self.row_sums = vec![0.0; rows];
     }
-}
-
-/// Defines `$name`, which runs the `#[inline(always)]` kernel `$kernel` compiled for AVX2 when
-/// the CPU has it (8-lane vectors instead of baseline SSE2's 4). The kernels add in a fixed
-/// order and use no FMA, so both paths give the same bits.
-macro_rules! avx2_dispatch {
-    ($name:ident => $kernel:ident ( $($arg:ident : $ty:ty),* $(,)? ) $(-> $ret:ty)?) => {
-        #[allow(clippy::too_many_arguments)]
-        fn $name($($arg: $ty),*) $(-> $ret)? {
-            #[cfg(target_arch = "x86_64")]
-            {
-                #[target_feature(enable = "avx2")]
-                #[allow(clippy::too_many_arguments)]
-                fn avx2($($arg: $ty),*) $(-> $ret)? {
-                    $kernel($($arg),*)
-                }
-                if std::arch::is_x86_feature_detected!("avx2") {
-                    // SAFETY: the CPU supports AVX2 (checked just above).
-                    return unsafe { avx2($($arg),*) };
-                }
-            }
-            $kernel($($arg),*)
-        }
-    };
 }
 
 /// `N` outputs of the horizontal pass from `src[..N + 2·RADIUS]`, taps added in order. `N`

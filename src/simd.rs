@@ -1,0 +1,32 @@
+//! Runtime CPU-feature dispatch shared by the CPU hot loops (rasterizer, SSIM, Adam).
+
+/// Defines `$name`, which runs the `#[inline(always)]` kernel `$kernel` compiled for AVX2 when
+/// the CPU has it (8-lane vectors instead of baseline SSE2's 4), and the baseline build
+/// otherwise. Kernels that add in a fixed order and use no FMA give the same bits on both paths.
+/// Attributes and doc comments before `$name` are kept.
+macro_rules! avx2_dispatch {
+    (
+        $(#[$meta:meta])*
+        $name:ident => $kernel:ident ( $($arg:ident : $ty:ty),* $(,)? ) $(-> $ret:ty)?
+    ) => {
+        $(#[$meta])*
+        #[allow(clippy::too_many_arguments)]
+        fn $name($($arg: $ty),*) $(-> $ret)? {
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx2")]
+                #[allow(clippy::too_many_arguments)]
+                fn avx2($($arg: $ty),*) $(-> $ret)? {
+                    $kernel($($arg),*)
+                }
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    // SAFETY: the CPU supports AVX2 (checked just above).
+                    return unsafe { avx2($($arg),*) };
+                }
+            }
+            $kernel($($arg),*)
+        }
+    };
+}
+
+pub(crate) use avx2_dispatch;
