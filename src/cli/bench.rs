@@ -14,7 +14,7 @@ use damage_twin::train::spec::TrainSpec;
 use damage_twin::train::trainer::{StageTimes, Trainer};
 use damage_twin::train::views::{InitialModel, initial_splats, load_views, split_views};
 
-use super::train::{RunArgs, holdout, open_dataset};
+use super::train::{RunArgs, open_dataset};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -54,11 +54,8 @@ fn floats_per_gaussian(splats: &Splats) -> usize {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let body = || -> anyhow::Result<Bench> {
         let dataset = open_dataset(&args.dataset, args.run.background)?;
-        let (train_idx, test_idx) = split_views(
-            &dataset,
-            &holdout(args.run.test_every, &args.run.test_views),
-        )
-        .map_err(anyhow::Error::msg)?;
+        let (train_idx, test_idx) =
+            split_views(&dataset, &args.run.holdout.holdout()).map_err(anyhow::Error::msg)?;
         let views = load_views(&dataset, &train_idx, args.run.scale, false)?;
         let heldout = load_views(&dataset, &test_idx, args.run.scale, false)?;
         let init = InitialModel {

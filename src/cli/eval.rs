@@ -14,7 +14,9 @@ use damage_twin::train::views::{load_views, split_views};
 use damage_twin::damage::TrainMode;
 use damage_twin::damage::evaluate::{DamageFigures, DamageReadout};
 
-use super::train::{damage_figures, holdout, open_dataset, palette, parse_background, parse_scale};
+use super::train::{
+    HoldoutArgs, damage_figures, open_dataset, palette, parse_background, parse_scale,
+};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -24,10 +26,8 @@ pub struct Args {
     pub dataset: PathBuf,
     #[arg(long, default_value = "1", value_parser = parse_scale)]
     pub scale: ImageScale,
-    #[arg(long, default_value_t = 8)]
-    pub test_every: usize,
-    #[arg(long, value_delimiter = ',')]
-    pub test_views: Vec<String>,
+    #[command(flatten)]
+    pub holdout: HoldoutArgs,
     #[arg(long, default_value = "black", value_parser = parse_background)]
     pub background: Vec3,
     /// Print JSON instead of text.
@@ -70,8 +70,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let splats = damage_twin::scene::ply::read_splats(&args.model)
         .with_context(|| format!("reading model {}", args.model.display()))?;
     let dataset = open_dataset(&args.dataset, args.background)?;
-    let (_, test_idx) = split_views(&dataset, &holdout(args.test_every, &args.test_views))
-        .map_err(anyhow::Error::msg)?;
+    let (_, test_idx) =
+        split_views(&dataset, &args.holdout.holdout()).map_err(anyhow::Error::msg)?;
     if test_idx.is_empty() {
         anyhow::bail!(
             "{} has no held-out views under this rule",

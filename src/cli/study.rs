@@ -16,7 +16,7 @@ use damage_twin::damage::study::{StudyConfig, StudyEvent, StudyRow, run_study};
 use damage_twin::report::study_chart::{study_csv, study_table, write_study_chart};
 use damage_twin::scene::ImageScale;
 
-use super::train::{holdout, open_dataset, palette, parse_scale, print_line};
+use super::train::{HoldoutArgs, open_dataset, palette, parse_scale, print_line};
 
 #[derive(clap::Subcommand, Debug)]
 pub enum Study {
@@ -43,10 +43,8 @@ pub struct MaskNoiseArgs {
     /// Image scale (4: 240×135 for the 960×540 demo building).
     #[arg(long, default_value = "4", value_parser = parse_scale)]
     pub scale: ImageScale,
-    #[arg(long, default_value_t = 8)]
-    pub test_every: usize,
-    #[arg(long, value_delimiter = ',')]
-    pub test_views: Vec<String>,
+    #[command(flatten)]
+    pub holdout: HoldoutArgs,
     /// Weight of the label loss (label mode).
     #[arg(long, default_value_t = 0.1)]
     pub label_weight: f32,
@@ -123,7 +121,7 @@ pub fn run(study: Study) -> anyhow::Result<()> {
             palette: palette(&args.colours)?,
             scale: args.scale,
             iterations: args.iters,
-            holdout: holdout(args.test_every, &args.test_views),
+            holdout: args.holdout.holdout(),
             seed: args.seed,
             label_weight: args.label_weight,
             ..RunConfig::default()

@@ -70,12 +70,8 @@ pub struct RunArgs {
     pub sh_degree: u32,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Hold out every n-th view (when the dataset has no test split).
-    #[arg(long, default_value_t = 8)]
-    pub test_every: usize,
-    /// Hold out exactly these views (comma-separated names, e.g. 0049).
-    #[arg(long, value_delimiter = ',')]
-    pub test_views: Vec<String>,
+    #[command(flatten)]
+    pub holdout: HoldoutArgs,
     /// Background: white, black or r,g,b in [0, 1].
     #[arg(long, default_value = "black", value_parser = parse_background)]
     pub background: Vec3,
@@ -141,12 +137,26 @@ pub fn parse_background(text: &str) -> Result<Vec3, String> {
     }
 }
 
-/// The held-out rule the `train`, `eval` and `render` commands share.
-pub fn holdout(test_every: usize, test_views: &[String]) -> Holdout {
-    if test_views.is_empty() {
-        Holdout::Auto { every: test_every }
-    } else {
-        Holdout::Named(test_views.to_vec())
+/// Which views are held out: the rule `train`, `bench`, `eval` and `study` share.
+#[derive(clap::Args, Debug)]
+pub struct HoldoutArgs {
+    /// Hold out every n-th view (when the dataset has no test split).
+    #[arg(long, default_value_t = 8)]
+    pub test_every: usize,
+    /// Hold out exactly these views (comma-separated names, e.g. 0049).
+    #[arg(long, value_delimiter = ',')]
+    pub test_views: Vec<String>,
+}
+
+impl HoldoutArgs {
+    pub fn holdout(&self) -> Holdout {
+        if self.test_views.is_empty() {
+            Holdout::Auto {
+                every: self.test_every,
+            }
+        } else {
+            Holdout::Named(self.test_views.clone())
+        }
     }
 }
 
@@ -214,11 +224,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for warning in &dataset.warnings {
         eprintln!("warning: {warning}");
     }
-    let (train_idx, test_idx) = split_views(
-        &dataset,
-        &holdout(args.run.test_every, &args.run.test_views),
-    )
-    .map_err(anyhow::Error::msg)?;
+    let (train_idx, test_idx) =
+        split_views(&dataset, &args.run.holdout.holdout()).map_err(anyhow::Error::msg)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output folder {}", args.out.display()))?;
 
@@ -227,7 +234,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         palette: palette(&args.colours)?,
         scale: args.run.scale,
         iterations: args.iters,
-        holdout: holdout(args.run.test_every, &args.run.test_views),
+        holdout: args.run.holdout.holdout(),
         sh_degree: args.run.sh_degree,
         seed: args.run.seed,
         background: args.run.background,

@@ -45,7 +45,7 @@ fn clone_copies_small_high_gradient_gaussians_with_new_ids() {
     let mut adam = Adam::new(&s);
     let mut d = Densifier::new(no_reset(), 2);
     feed(&mut d, &[3e-4, 1e-4], 5, 4);
-    let r = d.densify_and_prune(&mut s, &mut adam, EXTENT, None);
+    let r = d.densify_and_prune(&mut s, &mut adam, EXTENT, false);
     assert_eq!((r.cloned, r.split, r.pruned), (1, 0, 0));
     assert_eq!(s.len(), 3);
     assert_eq!(s.means[2], s.means[0]);
@@ -66,7 +66,7 @@ fn split_divides_scale_by_1_6_and_keeps_opacity() {
     let mut d = Densifier::new(no_reset(), 1);
     feed(&mut d, &[1e-3], 5, 1);
     let parent = s.clone();
-    let r = d.densify_and_prune(&mut s, &mut adam, EXTENT, None);
+    let r = d.densify_and_prune(&mut s, &mut adam, EXTENT, false);
     assert_eq!((r.cloned, r.split, r.pruned), (0, 1, 0));
     assert_eq!(s.len(), 2, "the parent is replaced by two children");
     for g in 0..2 {
@@ -103,7 +103,7 @@ fn split_children_are_drawn_from_the_rotated_parent_gaussian() {
     let mut adam = Adam::new(&s);
     let mut d = Densifier::new(no_reset(), n);
     feed(&mut d, &vec![1.0; n], 5, 1);
-    d.densify_and_prune(&mut s, &mut adam, EXTENT, None);
+    d.densify_and_prune(&mut s, &mut adam, EXTENT, false);
     let var =
         |f: fn(Vec3) -> f32| s.means.iter().map(|&m| f(m).powi(2)).sum::<f32>() / s.len() as f32;
     let (sx, sy) = (var(|m| m.x).sqrt(), var(|m| m.y).sqrt());
@@ -125,7 +125,7 @@ fn gradient_is_averaged_over_visible_steps_only() {
     assert_eq!(d.mean_grads(), vec![3e-4]);
     // Visible 3 more times with 0: mean 7.5e-5 < threshold.
     feed(&mut d, &[0.0], 4, 3);
-    let r = d.densify_and_prune(&mut s, &mut adam, EXTENT, None);
+    let r = d.densify_and_prune(&mut s, &mut adam, EXTENT, false);
     assert_eq!(r.cloned + r.split, 0);
     assert_eq!(
         d.mean_grads(),
@@ -143,9 +143,19 @@ fn prune_removes_transparent_and_after_reset_oversized_gaussians() {
     d.accumulate(&[0.0; 4], &[3, 3, 25, 3]);
     let r = d
         .clone()
-        .densify_and_prune(&mut s.clone(), &mut adam.clone(), EXTENT, None);
+        .densify_and_prune(&mut s.clone(), &mut adam.clone(), EXTENT, false);
     assert_eq!(r.pruned, 1, "before the first reset only opacity prunes");
-    let r = d.densify_and_prune(&mut s, &mut adam, EXTENT, Some(20.0));
+    let mut default_size = s.clone();
+    let r = d
+        .clone()
+        .densify_and_prune(&mut default_size, &mut adam.clone(), EXTENT, true);
+    assert_eq!(
+        r.pruned, 2,
+        "by default the screen radius does not prune (3DGS as it runs)"
+    );
+    assert_eq!(default_size.meta.ids, vec![102, 103]);
+    d.config.max_screen_size = Some(20.0);
+    let r = d.densify_and_prune(&mut s, &mut adam, EXTENT, true);
     assert_eq!(r.pruned, 3);
     assert_eq!(s.meta.ids, vec![103]);
     assert_eq!(adam.len(), 1);
@@ -159,7 +169,7 @@ fn frozen_gaussians_are_never_cloned_split_pruned_or_reset() {
     let mut adam = Adam::new(&s);
     let mut d = Densifier::new(DensifyConfig::default(), 4);
     feed(&mut d, &[1.0; 4], 30, 3);
-    let r = d.densify_and_prune(&mut s, &mut adam, EXTENT, Some(20.0));
+    let r = d.densify_and_prune(&mut s, &mut adam, EXTENT, true);
     assert_eq!((r.cloned, r.split, r.pruned), (0, 0, 0));
     d.reset_opacity(&mut s, &mut adam);
     assert_eq!(s, before);
@@ -215,7 +225,7 @@ fn budget_caps_the_count_and_prefers_high_gradients() {
     };
     let mut d = Densifier::new(config, 6);
     feed(&mut d, &[3e-4, 9e-4, 5e-4, 8e-4, 1e-4, 7e-4], 3, 1);
-    let r = d.densify_and_prune(&mut s, &mut adam, EXTENT, None);
+    let r = d.densify_and_prune(&mut s, &mut adam, EXTENT, false);
     assert_eq!(r.cloned, 2);
     assert_eq!(s.len(), 8);
     // Clones of Gaussians 1 and 3 (the two highest gradients), in index order.
@@ -230,7 +240,7 @@ fn densification_is_deterministic_for_a_seed() {
         let mut adam = Adam::new(&s);
         let mut d = Densifier::new(DensifyConfig { seed, ..no_reset() }, 3);
         feed(&mut d, &[1e-3; 3], 3, 1);
-        d.densify_and_prune(&mut s, &mut adam, EXTENT, None);
+        d.densify_and_prune(&mut s, &mut adam, EXTENT, false);
         s
     };
     assert_eq!(run(4), run(4));
@@ -259,7 +269,7 @@ fn adam_moments_follow_clones_and_pruning() {
     adam.step(&mut s, &grads, &[0.0; 7], &Default::default(), None);
     let mut d = Densifier::new(no_reset(), n);
     feed(&mut d, &[1e-3, 0.0, 0.0], 3, 1);
-    d.densify_and_prune(&mut s, &mut adam, EXTENT, None);
+    d.densify_and_prune(&mut s, &mut adam, EXTENT, false);
     // Gaussian 2 (transparent) pruned; 0 cloned to the end: [0, 1, clone of 0].
     assert_eq!(s.meta.ids, vec![100, 101, 103]);
     let m = adam.moments(ParamGroup::RawOpacities);
