@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::app::camera_controller::NavMode;
 use crate::damage::DamageClass;
+use crate::damage::setup::RunConfig;
 
 /// Key under which the settings live in eframe's storage.
 pub const STORAGE_KEY: &str = "damage-twin.settings";
@@ -85,7 +86,7 @@ impl Default for TrainingSettings {
             // Xvfb); a quarter is 4× cheaper and is the scale of docs/DAMAGE.md's figures.
             resolution_factor: 4,
             mode: TrainMode::Label,
-            label_weight: 0.1,
+            label_weight: RunConfig::default().label_weight,
         }
     }
 }
@@ -181,7 +182,12 @@ impl Settings {
         if ![1, 2, 4, 8].contains(&self.training.resolution_factor) {
             self.training.resolution_factor = 1;
         }
-        self.training.label_weight = clamp(self.training.label_weight, 0.0, 10.0, 0.1);
+        self.training.label_weight = clamp(
+            self.training.label_weight,
+            0.0,
+            10.0,
+            d.training.label_weight,
+        );
         self.recent.truncate(Self::MAX_RECENT);
         self
     }

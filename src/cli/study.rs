@@ -46,7 +46,7 @@ pub struct MaskNoiseArgs {
     #[command(flatten)]
     pub holdout: HoldoutArgs,
     /// Weight of the label loss (label mode).
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = RunConfig::default().label_weight)]
     pub label_weight: f32,
     /// Class colour override for overlay mode, class=r,g,b (repeatable).
     #[arg(long = "colour")]

@@ -46,7 +46,7 @@ pub struct Args {
     #[arg(long, default_value = "label")]
     pub mode: TrainMode,
     /// Weight of the label loss beside the photometric loss (label mode).
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = RunConfig::default().label_weight)]
     pub label_weight: f32,
     /// Class colour override for overlay mode, class=r,g,b (repeatable), e.g. crack=0,0,255.
     #[arg(long = "colour")]

@@ -49,7 +49,9 @@ impl Default for RunConfig {
             sh_degree: 3,
             seed: 0,
             background: Vec3::ZERO,
-            label_weight: 0.1,
+            // docs/DAMAGE.md: against 0.1 and 0.3, a weight of 1 raised the held-out crack IoU
+            // of the demo building from 0.60 and 0.67 to 0.71 (3,000 steps), for 0.6 dB of PSNR.
+            label_weight: 1.0,
             // Measured on the demo building (docs/DAMAGE.md): against 1.0 and the optimiser's
             // 0.01, these doubled the held-out crack IoU (0.19 → 0.41) in about half the steps.
             label_pos_weight: 4.0,
