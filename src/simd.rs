@@ -19,6 +19,22 @@ macro_rules! avx2_dispatch {
                 fn avx2($($arg: $ty),*) $(-> $ret)? {
                     $kernel($($arg),*)
                 }
+                // The same 8-lane code with AVX-512VL's encodings: 32 vector registers instead
+                // of 16 (the blend loops keep their polynomial constants in registers instead
+                // of reloading them) and mask registers for the compares. Still no FMA
+                // contraction (Rust never fuses), so the bits match the other paths.
+                #[target_feature(enable = "avx2,avx512f,avx512vl")]
+                #[allow(clippy::too_many_arguments)]
+                fn avx512($($arg: $ty),*) $(-> $ret)? {
+                    $kernel($($arg),*)
+                }
+                if std::arch::is_x86_feature_detected!("avx512f")
+                    && std::arch::is_x86_feature_detected!("avx512vl")
+                {
+                    // SAFETY: the CPU supports AVX-512F and VL (checked just above), which
+                    // imply AVX2.
+                    return unsafe { avx512($($arg),*) };
+                }
                 if std::arch::is_x86_feature_detected!("avx2") {
                     // SAFETY: the CPU supports AVX2 (checked just above).
                     return unsafe { avx2($($arg),*) };
