@@ -1,8 +1,8 @@
 //! Runtime CPU-feature dispatch shared by the CPU hot loops (rasterizer, SSIM, Adam).
 
-/// Defines `$name`, which runs the `#[inline(always)]` kernel `$kernel` compiled for AVX2 when
-/// the CPU has it (8-lane vectors instead of baseline SSE2's 4), and the baseline build
-/// otherwise. Kernels that add in a fixed order and use no FMA give the same bits on both paths.
+/// Defines `$name`, which runs the `#[inline(always)]` kernel `$kernel` compiled for AVX-512VL
+/// or else AVX2 when the CPU has it (8-lane vectors instead of baseline SSE2's 4), and the
+/// baseline build otherwise. Kernels that add in a fixed order and use no FMA give the same bits on both paths.
 /// Attributes and doc comments before `$name` are kept.
 macro_rules! avx2_dispatch {
     (
