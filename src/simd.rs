@@ -1,8 +1,8 @@
 //! Runtime CPU-feature dispatch shared by the CPU hot loops (rasterizer, SSIM, Adam).
 
-/// Defines `$name`, which runs the `#[inline(always)]` kernel `$kernel` compiled for AVX2 when
-/// the CPU has it (8-lane vectors instead of baseline SSE2's 4), and the baseline build
-/// otherwise. Kernels that add in a fixed order and use no FMA give the same bits on both paths.
+/// Defines `$name`, which runs the `#[inline(always)]` kernel `$kernel` compiled for AVX-512VL
+/// or else AVX2 when the CPU has it (8-lane vectors instead of baseline SSE2's 4), and the
+/// baseline build otherwise. Kernels that add in a fixed order and use no FMA give the same bits on both paths.
 /// Attributes and doc comments before `$name` are kept.
 macro_rules! avx2_dispatch {
     (
@@ -18,6 +18,22 @@ macro_rules! avx2_dispatch {
                 #[allow(clippy::too_many_arguments)]
                 fn avx2($($arg: $ty),*) $(-> $ret)? {
                     $kernel($($arg),*)
+                }
+                // The same 8-lane code with AVX-512VL's encodings: 32 vector registers instead
+                // of 16 (the blend loops keep their polynomial constants in registers instead
+                // of reloading them) and mask registers for the compares. Still no FMA
+                // contraction (Rust never fuses), so the bits match the other paths.
+                #[target_feature(enable = "avx2,avx512f,avx512vl")]
+                #[allow(clippy::too_many_arguments)]
+                fn avx512($($arg: $ty),*) $(-> $ret)? {
+                    $kernel($($arg),*)
+                }
+                if std::arch::is_x86_feature_detected!("avx512f")
+                    && std::arch::is_x86_feature_detected!("avx512vl")
+                {
+                    // SAFETY: the CPU supports AVX-512F and VL (checked just above), which
+                    // imply AVX2.
+                    return unsafe { avx512($($arg),*) };
                 }
                 if std::arch::is_x86_feature_detected!("avx2") {
                     // SAFETY: the CPU supports AVX2 (checked just above).
