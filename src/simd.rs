@@ -2,9 +2,10 @@
 
 /// Defines `$name`, which runs the `#[inline(always)]` kernel `$kernel` compiled for AVX-512VL
 /// or else AVX2 when the CPU has it (8-lane vectors instead of baseline SSE2's 4), and the
-/// baseline build otherwise. Kernels that add in a fixed order and use no FMA give the same bits on both paths.
+/// baseline build otherwise. Kernels that add in a fixed order and use no FMA give the same bits
+/// on every path.
 /// Attributes and doc comments before `$name` are kept.
-macro_rules! avx2_dispatch {
+macro_rules! simd_dispatch {
     (
         $(#[$meta:meta])*
         $name:ident => $kernel:ident ( $($arg:ident : $ty:ty),* $(,)? ) $(-> $ret:ty)?
@@ -30,9 +31,10 @@ macro_rules! avx2_dispatch {
                 }
                 if std::arch::is_x86_feature_detected!("avx512f")
                     && std::arch::is_x86_feature_detected!("avx512vl")
+                    && std::arch::is_x86_feature_detected!("avx2")
                 {
-                    // SAFETY: the CPU supports AVX-512F and VL (checked just above), which
-                    // imply AVX2.
+                    // SAFETY: the CPU supports AVX2, AVX-512F and AVX-512VL (checked just
+                    // above), every feature this build enables.
                     return unsafe { avx512($($arg),*) };
                 }
                 if std::arch::is_x86_feature_detected!("avx2") {
@@ -45,4 +47,4 @@ macro_rules! avx2_dispatch {
     };
 }
 
-pub(crate) use avx2_dispatch;
+pub(crate) use simd_dispatch;

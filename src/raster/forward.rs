@@ -9,7 +9,7 @@ use super::bin::TileBins;
 use super::fast_exp::fast_exp;
 use super::segments::SegmentStore;
 use super::{Projected, RenderOutput, RenderSettings, TILE_PIXELS, TILE_SIZE, TRANSMITTANCE_MIN};
-use crate::simd::avx2_dispatch;
+use crate::simd::simd_dispatch;
 
 /// Pixels evaluated together (one AVX register of f32).
 pub(crate) const LANES: usize = 8;
@@ -243,7 +243,7 @@ pub(crate) fn any_live(t: &[f32]) -> bool {
     t.iter().fold(false, |any, &t| any | (t > 0.0))
 }
 
-avx2_dispatch!(
+simd_dispatch!(
     /// [`rasterize_tile_impl`] with AVX2 where the CPU has it.
     rasterize_tile => rasterize_tile_impl(
         tile: usize,

@@ -15,7 +15,7 @@ use super::{
     MAX_LABEL_CHANNELS, PixelGrads, Projected, RenderSettings, ScreenGrads, TILE_PIXELS, TILE_SIZE,
     TRANSMITTANCE_MIN,
 };
-use crate::simd::avx2_dispatch;
+use crate::simd::simd_dispatch;
 
 const TS: usize = TILE_SIZE as usize;
 
@@ -287,7 +287,7 @@ fn backward_tile_kernel(
     }
 }
 
-avx2_dispatch!(
+simd_dispatch!(
     /// [`backward_tile_kernel`] with AVX2 where the CPU has it.
     backward_tile => backward_tile_kernel(
         tile: usize,

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use super::bin::TileBins;
 use super::forward::{LANES, Splat2d};
 use super::{Projected, TILE_SIZE};
-use crate::simd::avx2_dispatch;
+use crate::simd::simd_dispatch;
 
 const TS: usize = TILE_SIZE as usize;
 
@@ -110,7 +110,7 @@ fn tile_masks_impl(
     segments
 }
 
-avx2_dispatch!(
+simd_dispatch!(
     /// [`tile_masks_impl`] with AVX2 where the CPU has it: the 16-row mask then vectorises and
     /// rounds in registers (baseline x86-64 has no vector floor/ceil and calls libm per row).
     tile_masks => tile_masks_impl(

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 
 use super::schedule::ExponentialLr;
 use crate::raster::MAX_LABEL_CHANNELS;
-use crate::simd::avx2_dispatch;
+use crate::simd::simd_dispatch;
 use crate::splats::Splats;
 
 /// The trainable parameter groups, in the order of every `[_; 7]` array in this module.
@@ -315,7 +315,7 @@ fn update_chunk_impl(
     }
 }
 
-avx2_dispatch!(
+simd_dispatch!(
     /// [`update_chunk_impl`] with AVX2 where the CPU has it: 8 square roots and divisions per
     /// instruction instead of 4. Both are correctly rounded, so the bits are the same.
     update_chunk => update_chunk_impl(

@@ -7,15 +7,22 @@
 /// (at 10 a turntable view left it a tenth and the demo building stopped forming).
 const BACKGROUND_NICE: i32 = 5;
 
-/// Lowers the calling thread's scheduling priority (Linux; a no-op elsewhere). A failure leaves
-/// the thread at its priority, which only costs responsiveness, so it is not reported.
+/// Lowers the calling thread's scheduling priority (Linux; a no-op elsewhere). A thread that
+/// already runs nicer (the whole app started under `nice -n 19`) keeps its priority: a
+/// privileged process could otherwise raise it. A failure leaves the thread at its priority,
+/// which only costs responsiveness, so it is not reported.
 pub fn lower_current_thread_priority() {
     #[cfg(target_os = "linux")]
     {
-        // SAFETY: setpriority takes plain integers and touches no memory of ours. On Linux the
-        // nice value is per thread and `who = 0` names the calling thread.
+        // SAFETY: getpriority and setpriority take plain integers and touch no memory of ours.
+        // On Linux the nice value is per thread and `who = 0` names the calling thread.
+        // getpriority returns the nice value itself (-20..=19); -1 on error is a valid value
+        // too, and then the comparison below still only ever lowers the priority.
         unsafe {
-            libc::setpriority(libc::PRIO_PROCESS, 0, BACKGROUND_NICE);
+            let current = libc::getpriority(libc::PRIO_PROCESS, 0);
+            if current < BACKGROUND_NICE {
+                libc::setpriority(libc::PRIO_PROCESS, 0, BACKGROUND_NICE);
+            }
         }
     }
 }

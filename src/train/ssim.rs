@@ -6,7 +6,7 @@
 
 use rayon::prelude::*;
 
-use crate::simd::avx2_dispatch;
+use crate::simd::simd_dispatch;
 
 /// Window side and radius (3DGS `window_size = 11`).
 pub const SSIM_WINDOW: usize = 11;
@@ -132,7 +132,7 @@ fn hblur_rows_impl(kernel: &[f32; SSIM_WINDOW], padded: &[f32], out: &mut [f32],
     }
 }
 
-avx2_dispatch!(hblur_rows => hblur_rows_impl(
+simd_dispatch!(hblur_rows => hblur_rows_impl(
     kernel: &[f32; SSIM_WINDOW],
     padded: &[f32],
     out: &mut [f32],
@@ -197,7 +197,7 @@ fn vblur_rows_impl(
     }
 }
 
-avx2_dispatch!(vblur_rows => vblur_rows_impl(
+simd_dispatch!(vblur_rows => vblur_rows_impl(
     kernel: &[f32; SSIM_WINDOW],
     src: &[f32],
     out: &mut [f32],
@@ -298,7 +298,7 @@ fn partials_row_impl(
     ssim_out.iter().fold(0.0f64, |s, &v| s + v as f64)
 }
 
-avx2_dispatch!(partials_row => partials_row_impl(
+simd_dispatch!(partials_row => partials_row_impl(
     stats: [&[f32]; FWD],
     weights: Option<&[f32]>,
     uniform: f32,
