@@ -244,7 +244,7 @@ pub(crate) fn any_live(t: &[f32]) -> bool {
 }
 
 simd_dispatch!(
-    /// [`rasterize_tile_impl`] with AVX2 where the CPU has it.
+    /// [`rasterize_tile_impl`] with AVX2 (or AVX-512VL) where the CPU has it.
     rasterize_tile => rasterize_tile_impl(
         tile: usize,
         state: &mut [f32],

@@ -288,7 +288,7 @@ fn backward_tile_kernel(
 }
 
 simd_dispatch!(
-    /// [`backward_tile_kernel`] with AVX2 where the CPU has it.
+    /// [`backward_tile_kernel`] with AVX2 (or AVX-512VL) where the CPU has it.
     backward_tile => backward_tile_kernel(
         tile: usize,
         out: &mut [f32],

@@ -111,8 +111,9 @@ fn tile_masks_impl(
 }
 
 simd_dispatch!(
-    /// [`tile_masks_impl`] with AVX2 where the CPU has it: the 16-row mask then vectorises and
-    /// rounds in registers (baseline x86-64 has no vector floor/ceil and calls libm per row).
+    /// [`tile_masks_impl`] with AVX2 (or AVX-512VL) where the CPU has it: the 16-row mask then
+    /// vectorises and rounds in registers (baseline x86-64 has no vector floor/ceil and calls
+    /// libm per row).
     tile_masks => tile_masks_impl(
         tile: usize,
         masks: &mut [u32],

@@ -316,8 +316,9 @@ fn update_chunk_impl(
 }
 
 simd_dispatch!(
-    /// [`update_chunk_impl`] with AVX2 where the CPU has it: 8 square roots and divisions per
-    /// instruction instead of 4. Both are correctly rounded, so the bits are the same.
+    /// [`update_chunk_impl`] with AVX2 (or AVX-512VL) where the CPU has it: 8 square roots and
+    /// divisions per instruction instead of 4. Both are correctly rounded, so the bits are the
+    /// same.
     update_chunk => update_chunk_impl(
         p: &mut [f32],
         g: &[f32],
