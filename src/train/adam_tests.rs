@@ -1,0 +1,168 @@
+//! Adam against torch's: its steps, frozen and invisible Gaussians, disabled groups, growth and
+//! pruning, and the position schedule.
+
+use super::*;
+use glam::Quat;
+
+fn model(n: usize) -> Splats {
+    let mut s = Splats::empty(1, 2);
+    for g in 0..n {
+        s.push(
+            Vec3::splat(g as f32),
+            Vec3::ZERO,
+            Quat::IDENTITY,
+            0.0,
+            &[0.5; 12],
+            &[0.0; 2],
+            g as u64,
+            0,
+        );
+    }
+    s
+}
+
+struct Grads {
+    v3: Vec<Vec3>,
+    v4: Vec<Vec4>,
+    op: Vec<f32>,
+    sh: Vec<f32>,
+    lb: Vec<f32>,
+}
+
+impl Grads {
+    fn constant(s: &Splats, v: f32) -> Grads {
+        Grads {
+            v3: vec![Vec3::splat(v); s.len()],
+            v4: vec![Vec4::splat(v); s.len()],
+            op: vec![v; s.len()],
+            sh: vec![v; s.sh.len()],
+            lb: vec![v; s.raw_labels.len()],
+        }
+    }
+    fn view(&self) -> ParamGrads<'_> {
+        ParamGrads {
+            v_means: &self.v3,
+            v_log_scales: &self.v3,
+            v_rotations: &self.v4,
+            v_raw_opacities: &self.op,
+            v_sh: &self.sh,
+            v_raw_labels: &self.lb,
+        }
+    }
+}
+
+/// torch.optim.Adam on one scalar, in f64.
+fn reference(p0: f64, grads: &[f64], lr: f64) -> f64 {
+    let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-15f64);
+    let (mut p, mut m, mut v) = (p0, 0.0, 0.0);
+    for (t, &g) in grads.iter().enumerate() {
+        let t = t as i32 + 1;
+        m = b1 * m + (1.0 - b1) * g;
+        v = b2 * v + (1.0 - b2) * g * g;
+        let denom = v.sqrt() / (1.0 - b2.powi(t)).sqrt() + eps;
+        p -= lr / (1.0 - b1.powi(t)) * m / denom;
+    }
+    p
+}
+
+#[test]
+fn steps_match_torch_adam() {
+    let mut s = model(3);
+    let mut adam = Adam::new(&s);
+    let seq = [0.3f32, -0.1, 0.05, 0.2, -0.4];
+    let lrs = [0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07];
+    for &g in &seq {
+        let grads = Grads::constant(&s, g);
+        adam.step(&mut s, &grads.view(), &lrs, &GroupFlags::ALL_ON, None);
+    }
+    let gs: Vec<f64> = seq.iter().map(|&g| g as f64).collect();
+    let want = |p0: f64, lr: f64| reference(p0, &gs, lr) as f32;
+    assert!((s.means[2].x - want(2.0, 0.01)).abs() < 1e-5);
+    assert!((s.log_scales[1].y - want(0.0, 0.02)).abs() < 1e-5);
+    assert!((s.rotations[0].w - want(1.0, 0.03)).abs() < 1e-5);
+    assert!((s.raw_opacities[0] - want(0.0, 0.04)).abs() < 1e-5);
+    assert!(
+        (s.sh_of(1)[2] - want(0.5, 0.05)).abs() < 1e-5,
+        "DC uses the DC rate"
+    );
+    assert!(
+        (s.sh_of(1)[3] - want(0.5, 0.06)).abs() < 1e-5,
+        "rest uses the rest rate"
+    );
+    assert!((s.labels_of(2)[1] - want(0.0, 0.07)).abs() < 1e-5);
+    assert_eq!(adam.steps(ParamGroup::Means), 5);
+}
+
+#[test]
+fn frozen_and_invisible_gaussians_keep_parameters_and_moments() {
+    let mut s = model(4);
+    s.meta.frozen[1] = true;
+    let before = s.clone();
+    let mut adam = Adam::new(&s);
+    let grads = Grads::constant(&s, 1.0);
+    let visible = [true, true, false, true];
+    adam.step(
+        &mut s,
+        &grads.view(),
+        &[0.1; 7],
+        &GroupFlags::ALL_ON,
+        Some(&visible),
+    );
+    for g in 0..4 {
+        let moved = s.means[g] != before.means[g];
+        assert_eq!(moved, g == 0 || g == 3, "Gaussian {g}");
+        assert_eq!(s.sh_of(g) != before.sh_of(g), moved);
+    }
+    let (m, v) = adam.moments(ParamGroup::ShRest);
+    assert!(
+        m[9..18].iter().chain(&v[9..18]).all(|&x| x == 0.0),
+        "frozen moments untouched"
+    );
+    assert!(m[..9].iter().all(|&x| x != 0.0));
+}
+
+#[test]
+fn disabled_groups_are_not_updated_or_counted() {
+    let mut s = model(2);
+    let before = s.clone();
+    let mut adam = Adam::new(&s);
+    let mut flags = GroupFlags::ALL_OFF;
+    flags.set(ParamGroup::RawLabels, true);
+    let grads = Grads::constant(&s, 1.0);
+    adam.step(&mut s, &grads.view(), &[0.1; 7], &flags, None);
+    assert_eq!(s.means, before.means);
+    assert_eq!(s.sh, before.sh);
+    assert_eq!(s.raw_opacities, before.raw_opacities);
+    assert_ne!(s.raw_labels, before.raw_labels);
+    assert_eq!(adam.steps(ParamGroup::Means), 0);
+    assert_eq!(adam.steps(ParamGroup::RawLabels), 1);
+}
+
+#[test]
+fn append_and_retain_keep_moments_aligned() {
+    let mut s = model(3);
+    let mut adam = Adam::new(&s);
+    let mut grads = Grads::constant(&s, 0.0);
+    grads.op = vec![1.0, 2.0, 3.0];
+    adam.step(&mut s, &grads.view(), &[0.0; 7], &GroupFlags::ALL_ON, None);
+    adam.append(2);
+    assert_eq!(adam.len(), 5);
+    adam.retain(&[false, true, true, true, false]);
+    let (m, _) = adam.moments(ParamGroup::RawOpacities);
+    assert_eq!(m.len(), 3);
+    assert!((m[0] - 0.2).abs() < 1e-7 && (m[1] - 0.3).abs() < 1e-7 && m[2] == 0.0);
+    assert_eq!(adam.moments(ParamGroup::ShRest).0.len(), 3 * 9);
+}
+
+#[test]
+fn position_rate_scales_with_extent_and_decays() {
+    let lr = LearningRates {
+        position_max_steps: 1000,
+        ..LearningRates::default()
+    };
+    let a = lr.for_step(0, 5.0);
+    let b = lr.for_step(1000, 5.0);
+    assert!((a[0] - 1.6e-4 * 5.0).abs() < 1e-9);
+    assert!((b[0] - 1.6e-6 * 5.0).abs() < 1e-11);
+    assert_eq!(a[ParamGroup::ShRest.index()], 2.5e-3 / 20.0);
+}
