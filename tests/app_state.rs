@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use damage_twin::app::commands::Command;
 use damage_twin::app::history::{History, Sample};
-use damage_twin::app::settings::{CompareMode, Settings, TrainMode};
+use damage_twin::app::settings::{CompareMode, Settings, TrainMode, TrainingSettings};
 use damage_twin::app::state::{AppState, Photo, WorkerResult};
 use damage_twin::scene::{Camera, Dataset, DatasetFormat, Intrinsics, Split, View};
 use damage_twin::splats::Splats;
@@ -111,6 +111,38 @@ fn settings_survive_a_storage_round_trip() {
     s.remember(std::path::Path::new("/data/bridge"));
     let text = s.to_ron().expect("serialises");
     assert_eq!(Settings::from_ron(&text).expect("parses"), s);
+}
+
+#[test]
+fn settings_from_before_versions_take_the_new_label_weight_default() {
+    // What a viewer of 24 Nov stored: no version, the old default label weight.
+    let old =
+        "(training: (iterations: 3000, resolution_factor: 4, mode: label, label_weight: 0.1))";
+    let s = Settings::from_ron(old).expect("parses");
+    assert_eq!(
+        s.training.label_weight,
+        TrainingSettings::default().label_weight
+    );
+    assert_eq!(s.version, Settings::default().version);
+    let chosen = "(training: (label_weight: 0.5))";
+    assert_eq!(
+        Settings::from_ron(chosen)
+            .expect("parses")
+            .training
+            .label_weight,
+        0.5
+    );
+    // Once stored at the current version, 0.1 is the user's choice and stays.
+    let mut current = Settings::default();
+    current.training.label_weight = 0.1;
+    let text = current.to_ron().expect("serialises");
+    assert_eq!(
+        Settings::from_ron(&text)
+            .expect("parses")
+            .training
+            .label_weight,
+        0.1
+    );
 }
 
 #[test]

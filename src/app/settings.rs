@@ -124,6 +124,17 @@ pub struct Settings {
     pub show_charts: bool,
     /// Most recently opened datasets / projects, newest first.
     pub recent: Vec<std::path::PathBuf>,
+    /// Format of the stored settings; files written before versions existed read as 0.
+    #[serde(default = "unversioned")]
+    pub version: u32,
+}
+
+/// Version of the settings this build writes. 1: the label loss default went from 0.1 to 1.
+const SETTINGS_VERSION: u32 = 1;
+
+/// The version of a settings file that names none.
+fn unversioned() -> u32 {
+    0
 }
 
 impl Default for Settings {
@@ -147,6 +158,7 @@ impl Default for Settings {
             damage: DamageLayer::default(),
             show_charts: true,
             recent: Vec::new(),
+            version: SETTINGS_VERSION,
         }
     }
 }
@@ -204,9 +216,24 @@ impl Settings {
         ron::to_string(self)
     }
 
-    /// Parses a stored form; unknown or missing fields fall back to defaults.
+    /// Parses a stored form; unknown or missing fields fall back to defaults, and older
+    /// versions are brought up to this one.
     pub fn from_ron(text: &str) -> Result<Settings, ron::error::SpannedError> {
-        ron::from_str::<Settings>(text).map(Settings::sanitised)
+        ron::from_str::<Settings>(text)
+            .map(Settings::migrated)
+            .map(Settings::sanitised)
+    }
+
+    /// Brings settings stored by an older build up to [`SETTINGS_VERSION`]. Every viewer before
+    /// version 1 stored the label weight whether or not the user touched it, so its old default
+    /// (0.1) stands for "the default" and becomes the new one; any other value was chosen and
+    /// stays.
+    fn migrated(mut self) -> Settings {
+        if self.version < 1 && self.training.label_weight == 0.1 {
+            self.training.label_weight = TrainingSettings::default().label_weight;
+        }
+        self.version = SETTINGS_VERSION;
+        self
     }
 
     /// Loads from eframe storage, defaults when absent or unreadable.
