@@ -159,7 +159,7 @@ fn render_jobs(jobs: &Receiver<Job>, pictures: &Sender<Picture>, ctx: &egui::Con
         };
         let settings = RenderSettings::new(glam::Vec3::from_array(r.background), shown.sh_degree);
         rasterizer.forward(shown, &r.camera, &settings, &mut out);
-        let image = to_color_image(&out);
+        let image = color_image(out.width as usize, out.height as usize, &out.color);
         let picture = Picture {
             request: job.request,
             image,
@@ -172,19 +172,15 @@ fn render_jobs(jobs: &Receiver<Job>, pictures: &Sender<Picture>, ctx: &egui::Con
     }
 }
 
-/// Linear RGB in [0, 1] (as the rasterizer blends) to an sRGB-free 8-bit texture, like the GPU
-/// path's `Rgba8Unorm` output.
-fn to_color_image(out: &RenderOutput) -> egui::ColorImage {
-    let pixels = (out.width * out.height) as usize;
-    let mut rgba = Vec::with_capacity(pixels * 4);
-    for p in 0..pixels {
-        for c in 0..3 {
-            let v = out.color.get(p * 3 + c).copied().unwrap_or(0.0);
-            rgba.push((v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
-        }
-        rgba.push(255);
-    }
-    egui::ColorImage::from_rgba_unmultiplied([out.width as usize, out.height as usize], &rgba)
+/// Interleaved RGB in [0, 1] (a render as the rasterizer blends it, or a photo) as an opaque
+/// 8-bit texture image, values taken as they are like the GPU path's `Rgba8Unorm` output; values
+/// missing from a short buffer read as black.
+pub fn color_image(width: usize, height: usize, rgb: &[f32]) -> egui::ColorImage {
+    let byte = |i: usize| (rgb.get(i).copied().unwrap_or(0.0).clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+    let pixels = (0..width * height)
+        .map(|p| egui::Color32::from_rgb(byte(p * 3), byte(p * 3 + 1), byte(p * 3 + 2)))
+        .collect();
+    egui::ColorImage::new([width, height], pixels)
 }
 
 #[cfg(test)]

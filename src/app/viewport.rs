@@ -9,7 +9,7 @@ use glam::{Vec2, Vec3};
 
 use crate::app::camera_controller::CameraInput;
 use crate::app::commands::Command;
-use crate::app::cpu_view::{CpuView, ViewRequest};
+use crate::app::cpu_view::{CpuView, ViewRequest, color_image};
 use crate::app::overlay::{self, SegmentKind};
 use crate::app::resolution::{AdaptiveResolution, FrameSample, scaled_size};
 use crate::app::settings::CompareMode;
@@ -187,16 +187,8 @@ fn fit_aspect(rect: egui::Rect, w: f32, h: f32) -> egui::Rect {
 }
 
 fn photo_texture(ctx: &egui::Context, image: &RgbImage) -> egui::TextureHandle {
-    let pixels: Vec<egui::Color32> = image
-        .data
-        .chunks_exact(3)
-        .map(|c| {
-            let b = |v: f32| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
-            egui::Color32::from_rgb(b(c[0]), b(c[1]), b(c[2]))
-        })
-        .collect();
-    let color_image = egui::ColorImage::new([image.width as usize, image.height as usize], pixels);
-    ctx.load_texture("survey-photo", color_image, egui::TextureOptions::LINEAR)
+    let pixels = color_image(image.width as usize, image.height as usize, &image.data);
+    ctx.load_texture("survey-photo", pixels, egui::TextureOptions::LINEAR)
 }
 
 impl Viewport {
