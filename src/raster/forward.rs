@@ -6,7 +6,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::bin::TileBins;
-use super::fast_exp::fast_exp;
+use super::fast_exp::{LOG2_E, fast_exp2};
 use super::segments::SegmentStore;
 use super::{Projected, RenderOutput, RenderSettings, TILE_PIXELS, TILE_SIZE, TRANSMITTANCE_MIN};
 use crate::simd::simd_dispatch;
@@ -74,10 +74,14 @@ pub(crate) fn falloff(
     alpha: &mut [f32; LANES],
     ok: &mut [bool; LANES],
 ) {
+    // sigma · log2(e) = d (a' d + b' dy) + c' dy² with the conic pre-scaled once per segment.
+    let a_half = 0.5 * LOG2_E * sp.a;
+    let b_dy = LOG2_E * sp.b * dy;
+    let c_dy2_half = 0.5 * LOG2_E * sp.c * dy * dy;
     for l in 0..LANES {
         let d = sp.mx - (x0 + l as f32);
-        let sigma = 0.5 * (sp.a * d * d + sp.c * dy * dy) + sp.b * d * dy;
-        let e = fast_exp(-sigma);
+        let sigma = d * (a_half * d + b_dy) + c_dy2_half;
+        let e = fast_exp2(-sigma);
         let raw = sp.opacity * e;
         let al = if raw < alpha_max { raw } else { alpha_max };
         dx[l] = d;
@@ -145,7 +149,8 @@ fn rasterize_tile_impl(
     let mut dx = [0.0; LANES];
     let mut vis = [0.0; LANES];
     let mut raw = [0.0; LANES];
-    let mut alpha = [0.0; LANES];
+    let mut seg_alpha = [[0.0f32; LANES]; 2 * TS];
+    let mut seg_stored = [[0.0f32; LANES]; 2 * TS];
     let mut ok = [false; LANES];
     let mut w = [0.0f32; LANES];
     let mut vis_pos = 0;
@@ -158,20 +163,15 @@ fn rasterize_tile_impl(
         let g = ids[n] as usize;
         let sp = Splat2d::load(projected, g);
         let label_values = &projected.labels[g * labels..(g + 1) * labels];
-        let mut todo = masks[n];
-        // The segments where some lane blended or stopped: the only ones the backward replays.
-        let mut used = 0u32;
-        while todo != 0 {
-            let s = todo.trailing_zeros() as usize;
-            todo &= todo - 1;
+        let todo = masks[n];
+        // Two passes over the segments: first every falloff (independent of the tile state, so
+        // the out-of-order core overlaps their exp chains), then the blends.
+        let count = todo.count_ones() as usize;
+        let mut bits = todo;
+        for k in 0..count {
+            let s = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
             let (y, half) = (s / 2, (s % 2) * LANES);
-            let base = y * TS + half;
-            let t_seg: &mut [f32; LANES] = (&mut t_buf[base..base + LANES])
-                .try_into()
-                .expect("8 lanes");
-            if !any_live(t_seg) {
-                continue;
-            }
             let dy = sp.my - (oy + y as f32 + 0.5);
             falloff(
                 &sp,
@@ -182,13 +182,29 @@ fn rasterize_tile_impl(
                 &mut dx,
                 &mut vis,
                 &mut raw,
-                &mut alpha,
+                &mut seg_alpha[k],
                 &mut ok,
             );
+            for l in 0..LANES {
+                seg_stored[k][l] = if ok[l] { vis[l] } else { -1.0 };
+            }
+        }
+        // The segments where some lane blended or stopped: the only ones the backward replays.
+        let mut used = 0u32;
+        let mut bits = todo;
+        for k in 0..count {
+            let s = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let base = (s / 2) * TS + (s % 2) * LANES;
+            let t_seg: &mut [f32; LANES] = (&mut t_buf[base..base + LANES])
+                .try_into()
+                .expect("8 lanes");
+            let alpha = &seg_alpha[k];
+            let stored_k = &seg_stored[k];
             let mut any_valid = false;
             for l in 0..LANES {
                 let t = t_seg[l];
-                let valid = (t > 0.0) & ok[l];
+                let valid = (t > 0.0) & (stored_k[l] >= 0.0);
                 any_valid |= valid;
                 let next_t = t * (1.0 - alpha[l]);
                 // gsplat: `if (next_T <= 1e-4) { done = true; break; }` (exclusive).
@@ -211,17 +227,15 @@ fn rasterize_tile_impl(
                 .try_into()
                 .expect("8 lanes");
             vis_pos += LANES;
-            for l in 0..LANES {
-                stored[l] = if ok[l] { vis[l] } else { -1.0 };
-            }
+            *stored = *stored_k;
             for l in 0..LANES {
                 r_buf[base + l] += w[l] * sp.color.x;
                 g_buf[base + l] += w[l] * sp.color.y;
                 b_buf[base + l] += w[l] * sp.color.z;
                 depth_buf[base + l] += w[l] * sp.depth;
             }
-            for (k, &p) in label_values.iter().enumerate() {
-                let seg = &mut label_buf[k * TILE_PIXELS + base..k * TILE_PIXELS + base + LANES];
+            for (c, &p) in label_values.iter().enumerate() {
+                let seg = &mut label_buf[c * TILE_PIXELS + base..c * TILE_PIXELS + base + LANES];
                 for l in 0..LANES {
                     seg[l] += w[l] * p;
                 }
