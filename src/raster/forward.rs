@@ -26,7 +26,7 @@ pub(crate) fn state_channels(label_channels: usize) -> usize {
 }
 
 /// One projected Gaussian as the blending loops read it.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Splat2d {
     pub mx: f32,
     pub my: f32,
@@ -127,6 +127,7 @@ fn rasterize_tile_impl(
     state: &mut [f32],
     masks: &mut [u32],
     seg_vis: &mut [f32],
+    splats: &[Splat2d],
     projected: &Projected,
     bins: &TileBins,
     labels: usize,
@@ -161,7 +162,7 @@ fn rasterize_tile_impl(
             break;
         }
         let g = ids[n] as usize;
-        let sp = Splat2d::load(projected, g);
+        let sp = splats[n];
         let label_values = &projected.labels[g * labels..(g + 1) * labels];
         let todo = masks[n];
         // Two passes over the segments: first every falloff (independent of the tile state, so
@@ -264,6 +265,7 @@ simd_dispatch!(
         state: &mut [f32],
         masks: &mut [u32],
         seg_vis: &mut [f32],
+        splats: &[Splat2d],
         projected: &Projected,
         bins: &TileBins,
         labels: usize,
@@ -291,12 +293,13 @@ pub(crate) fn rasterize(
         .par_chunks_mut(stride)
         .zip(segments.tiles_mut(bins))
         .enumerate()
-        .for_each(|(tile, (st, (masks, vis)))| {
+        .for_each(|(tile, (st, (masks, vis, splats)))| {
             rasterize_tile(
                 tile,
                 st,
                 masks,
                 vis,
+                splats,
                 projected,
                 bins,
                 labels,

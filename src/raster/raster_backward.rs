@@ -102,6 +102,7 @@ fn backward_tile_impl<const HAS_LABELS: bool>(
     out: &mut [f32],
     masks: &[u32],
     seg_vis: &[f32],
+    splats: &[Splat2d],
     projected: &Projected,
     bins: &TileBins,
     inputs: &TileInputs,
@@ -132,7 +133,7 @@ fn backward_tile_impl<const HAS_LABELS: bool>(
         }
         let g = g as usize;
         let isect_out = &mut out[n * stride..(n + 1) * stride];
-        let sp = Splat2d::load(projected, g);
+        let sp = splats[n];
         let label_values = &projected.labels[g * labels..(g + 1) * labels];
         let mut s_dx = [0.0f32; LANES];
         let mut s_dy = [0.0f32; LANES];
@@ -270,6 +271,7 @@ fn backward_tile_kernel(
     out: &mut [f32],
     masks: &[u32],
     seg_vis: &[f32],
+    splats: &[Splat2d],
     projected: &Projected,
     bins: &TileBins,
     inputs: &TileInputs,
@@ -278,11 +280,11 @@ fn backward_tile_kernel(
 ) {
     if labels > 0 {
         backward_tile_impl::<true>(
-            tile, out, masks, seg_vis, projected, bins, inputs, labels, alpha_max,
+            tile, out, masks, seg_vis, splats, projected, bins, inputs, labels, alpha_max,
         )
     } else {
         backward_tile_impl::<false>(
-            tile, out, masks, seg_vis, projected, bins, inputs, labels, alpha_max,
+            tile, out, masks, seg_vis, splats, projected, bins, inputs, labels, alpha_max,
         )
     }
 }
@@ -294,6 +296,7 @@ simd_dispatch!(
         out: &mut [f32],
         masks: &[u32],
         seg_vis: &[f32],
+        splats: &[Splat2d],
         projected: &Projected,
         bins: &TileBins,
         inputs: &TileInputs,
@@ -362,6 +365,7 @@ pub(crate) fn rasterize_backward(
                 out,
                 &segments.masks[start as usize..end as usize],
                 segments.tile_vis(tile),
+                &segments.splats[start as usize..end as usize],
                 projected,
                 bins,
                 inputs,

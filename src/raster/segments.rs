@@ -17,6 +17,9 @@ pub(crate) struct SegmentStore {
     /// Per intersection: before the forward, the segments it can touch; after it, the ones it
     /// blended into or stopped a pixel in (the only ones the backward replays).
     pub masks: Vec<u32>,
+    /// Per intersection its projected Gaussian, copied in tile and depth order: the blend loops
+    /// then stream through it instead of missing the cache on every Gaussian of a tile.
+    pub splats: Vec<Splat2d>,
     /// Per tile its first float in `vis` (`tiles + 1` entries): room for 8 lanes of every
     /// segment the tile's intersections can touch.
     offsets: Vec<usize>,
@@ -42,14 +45,18 @@ impl SegmentStore {
         let power_max = &self.power_max;
         self.masks.clear();
         self.masks.resize(bins.gaussian_ids.len(), 0);
+        self.splats.clear();
+        self.splats
+            .resize(bins.gaussian_ids.len(), Splat2d::default());
         self.counts.clear();
         self.counts.resize(tiles, 0);
         bins.split_by_tile(&mut self.masks, 1)
             .into_par_iter()
+            .zip(bins.split_by_tile(&mut self.splats, 1))
             .zip(self.counts.par_iter_mut())
             .enumerate()
-            .for_each(|(tile, (masks, count))| {
-                *count = tile_masks(tile, masks, projected, bins, power_max) * LANES;
+            .for_each(|(tile, ((masks, splats), count))| {
+                *count = tile_masks(tile, masks, splats, projected, bins, power_max) * LANES;
             });
         self.offsets.clear();
         let mut total = 0;
@@ -65,14 +72,19 @@ impl SegmentStore {
         }
     }
 
-    /// Per tile its masks and its room for falloffs, disjoint, for the forward to fill.
-    pub fn tiles_mut(&mut self, bins: &TileBins) -> Vec<(&mut [u32], &mut [f32])> {
+    /// Per tile its masks and its room for falloffs, disjoint, for the forward to fill, and its
+    /// intersections' Gaussians.
+    pub fn tiles_mut(&mut self, bins: &TileBins) -> Vec<(&mut [u32], &mut [f32], &[Splat2d])> {
         let masks = bins.split_by_tile(&mut self.masks, 1);
         let mut rest = &mut self.vis[..];
         let mut parts = Vec::with_capacity(masks.len());
-        for (m, w) in masks.into_iter().zip(self.offsets.windows(2)) {
+        for ((m, w), [start, end]) in masks
+            .into_iter()
+            .zip(self.offsets.windows(2))
+            .zip(&bins.tile_ranges)
+        {
             let (head, tail) = rest.split_at_mut(w[1] - w[0]);
-            parts.push((m, head));
+            parts.push((m, head, &self.splats[*start as usize..*end as usize]));
             rest = tail;
         }
         parts
@@ -84,11 +96,13 @@ impl SegmentStore {
     }
 }
 
-/// Writes the segment mask of each intersection of `tile`; returns their total segment count.
+/// Writes the segment mask and the projected Gaussian of each intersection of `tile`; returns
+/// their total segment count.
 #[inline(always)]
 fn tile_masks_impl(
     tile: usize,
     masks: &mut [u32],
+    splats: &mut [Splat2d],
     projected: &Projected,
     bins: &TileBins,
     power_max: &[f32],
@@ -101,10 +115,11 @@ fn tile_masks_impl(
     let [start, end] = bins.tile_ranges[tile];
     let ids = &bins.gaussian_ids[start as usize..end as usize];
     let mut segments = 0;
-    for (mask, &g) in masks.iter_mut().zip(ids) {
+    for ((mask, splat), &g) in masks.iter_mut().zip(splats.iter_mut()).zip(ids) {
         let g = g as usize;
         let sp = Splat2d::load(projected, g);
         *mask = segment_mask(&sp, power_max[g], footprint(projected, g, ox, oy), ox, oy);
+        *splat = sp;
         segments += mask.count_ones() as usize;
     }
     segments
@@ -117,6 +132,7 @@ simd_dispatch!(
     tile_masks => tile_masks_impl(
         tile: usize,
         masks: &mut [u32],
+        splats: &mut [Splat2d],
         projected: &Projected,
         bins: &TileBins,
         power_max: &[f32],
