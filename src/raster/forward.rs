@@ -56,23 +56,19 @@ impl Splat2d {
     }
 }
 
-/// Per lane of a row segment starting at pixel-centre x `x0`: the offset `dx = mean.x - px`,
-/// `exp(-power)`, the unclamped and clamped alpha, and whether the pixel passes gsplat's
-/// `sigma < 0 || alpha < 1/255` skip. The backward replays what the forward stored of it
-/// ([`replay_falloff`]), so both take identical decisions bit for bit.
+/// Per lane of a row segment starting at pixel-centre x `x0`: the clamped alpha, and
+/// `exp(-power)` where the pixel passes gsplat's `sigma < 0 || alpha < 1/255` skip, -1 where it
+/// does not. The forward stores the latter for the backward to replay ([`replay_falloff`]), so
+/// both take identical decisions bit for bit.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn falloff(
     sp: &Splat2d,
     x0: f32,
     dy: f32,
     alpha_max: f32,
     alpha_threshold: f32,
-    dx: &mut [f32; LANES],
-    vis: &mut [f32; LANES],
-    raw_alpha: &mut [f32; LANES],
     alpha: &mut [f32; LANES],
-    ok: &mut [bool; LANES],
+    stored: &mut [f32; LANES],
 ) {
     // sigma · log2(e) = d (a' d + b' dy) + c' dy² with the conic pre-scaled once per segment.
     let a_half = 0.5 * LOG2_E * sp.a;
@@ -84,11 +80,12 @@ pub(crate) fn falloff(
         let e = fast_exp2(-sigma);
         let raw = sp.opacity * e;
         let al = if raw < alpha_max { raw } else { alpha_max };
-        dx[l] = d;
-        vis[l] = e;
-        raw_alpha[l] = raw;
         alpha[l] = al;
-        ok[l] = sigma >= 0.0 && al >= alpha_threshold;
+        stored[l] = if sigma >= 0.0 && al >= alpha_threshold {
+            e
+        } else {
+            -1.0
+        };
     }
 }
 
@@ -147,12 +144,9 @@ fn rasterize_tile_impl(
     // A finished pixel keeps its transmittance negated, so "live" is `t > 0` and the blend loop
     // works on floats only (a separate bool array costs more in mask conversions than the blend).
     let [start, end] = bins.tile_ranges[tile];
-    let mut dx = [0.0; LANES];
-    let mut vis = [0.0; LANES];
-    let mut raw = [0.0; LANES];
+    // Per segment of the current intersection (at most 32): its falloff.
     let mut seg_alpha = [[0.0f32; LANES]; 2 * TS];
     let mut seg_stored = [[0.0f32; LANES]; 2 * TS];
-    let mut ok = [false; LANES];
     let mut w = [0.0f32; LANES];
     let mut vis_pos = 0;
     let ids = &bins.gaussian_ids[start as usize..end as usize];
@@ -180,15 +174,9 @@ fn rasterize_tile_impl(
                 dy,
                 alpha_max,
                 alpha_threshold,
-                &mut dx,
-                &mut vis,
-                &mut raw,
                 &mut seg_alpha[k],
-                &mut ok,
+                &mut seg_stored[k],
             );
-            for l in 0..LANES {
-                seg_stored[k][l] = if ok[l] { vis[l] } else { -1.0 };
-            }
         }
         // The segments where some lane blended or stopped: the only ones the backward replays.
         let mut used = 0u32;
