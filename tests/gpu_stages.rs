@@ -199,12 +199,14 @@ fn nan_parameters_are_culled_not_propagated() {
     let mut poisoned = clean.clone();
     let bad: Vec<usize> = (0..clean.len()).step_by(37).collect();
     for (i, &g) in bad.iter().enumerate() {
-        match i % 6 {
+        match i % 7 {
             0 => poisoned.means[g].x = f32::NAN,
             1 => poisoned.log_scales[g].y = f32::NAN,
             2 => poisoned.rotations[g] = glam::Quat::from_xyzw(0.0, 0.0, 0.0, 0.0),
             3 => poisoned.raw_opacities[g] = f32::NAN,
             4 => poisoned.sh[g * 48 + 5] = f32::INFINITY,
+            // The colour clamp would turn this one into a finite 0 if it were tested after it.
+            5 => poisoned.sh[g * 48] = f32::NEG_INFINITY,
             _ => poisoned.raw_labels[g * 2 + 1] = f32::NAN,
         }
     }

@@ -404,6 +404,15 @@ fn nan_parameters_are_culled_not_propagated() {
         raster.projected().radii.iter().all(|&r| r == 0),
         "all six culled"
     );
+    // A negative infinity in the SH is culled too, although the colour clamp `max(sum + 0.5, 0)`
+    // turns it into a finite 0 (the GPU projection culls it as well).
+    let mut minus_inf = scene(5, 6);
+    minus_inf.sh[2 * 48] = f32::NEG_INFINITY;
+    raster.forward(&minus_inf, &camera(), &settings(), &mut out);
+    let radii = &raster.projected().radii;
+    assert_eq!(radii[2], 0, "a -inf SH coefficient was not culled");
+    assert!(radii.iter().enumerate().all(|(g, &r)| g == 2 || r > 0));
+    raster.forward(&splats, &camera(), &settings(), &mut out);
     assert!(
         out.color
             .iter()

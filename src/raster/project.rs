@@ -188,8 +188,10 @@ fn project_one(
     let color = (raw + Vec3::splat(0.5)).max(Vec3::ZERO);
     let l = splats.label_channels;
     let label_sum: f32 = splats.raw_labels[g * l..(g + 1) * l].iter().sum();
-    // Anything non-finite (NaN/Inf parameters) is culled here rather than blended.
-    let check = conic.x + conic.y + conic.z + mean2d.x + mean2d.y + color.x + color.y + color.z;
+    // Anything non-finite (NaN/Inf parameters) is culled here rather than blended. The SH sum
+    // is tested before the clamp: `max(-inf, 0)` would hide an infinite coefficient (the GPU
+    // projection tests the same sum).
+    let check = conic.x + conic.y + conic.z + mean2d.x + mean2d.y + raw.x + raw.y + raw.z;
     if !(check + opacity + label_sum).is_finite() || extent.is_nan() {
         return None;
     }
