@@ -9,9 +9,10 @@ use damage_twin::raster::{RenderSettings, render};
 use damage_twin::scene::{Camera, Intrinsics, RgbImage};
 use damage_twin::splats::Splats;
 use damage_twin::splats::init::{InitOptions, from_points, random_points};
+use damage_twin::train::evaluate::evaluate_views;
 use damage_twin::train::job::{JobEvent, JobOptions, TrainJob, TrainSetup};
 use damage_twin::train::spec::{TrainSpec, TrainView};
-use damage_twin::train::trainer::{Trainer, evaluate_views};
+use damage_twin::train::trainer::Trainer;
 
 const SIZE: u32 = 48;
 
@@ -143,13 +144,21 @@ fn a_nan_step_is_rolled_back_and_training_recovers() {
     for g in 0..trainer.splats().len() {
         trainer.poison_for_test(g);
     }
-    let report = trainer.step();
-    let reason = report.rolled_back.expect("the NaN step must be reported");
+    // Projection culls a Gaussian with a non-finite parameter (as the GPU does), so the poisoned
+    // model renders nothing rather than NaN, and visible Adam leaves it alone. The full scan
+    // before the next checkpoint must find it: here the opacity reset at step 66, the first
+    // density change (checkpoints come every 100 steps and after density changes).
+    let report = loop {
+        let report = trainer.step();
+        if report.rolled_back.is_some() || report.step >= 100 {
+            break report;
+        }
+    };
+    let reason = report.rolled_back.expect("the NaN must be reported");
+    assert!(reason.contains("non-finite"), "{reason}");
     assert!(reason.contains("restored to step"), "{reason}");
-    assert_eq!(report.step, 51);
-    assert!(report.loss.is_nan());
-    // Restored to the last checkpoint: step 0 here (checkpoints come every 100 steps and after
-    // density changes, the first of which is the opacity reset at step 66).
+    assert_eq!(report.step, 66);
+    // Restored to the last checkpoint: step 0 here.
     assert_ne!(trainer.splats(), &good);
     assert_eq!(
         trainer.splats(),

@@ -8,7 +8,7 @@ use glam::Vec3;
 use serde::Serialize;
 
 use damage_twin::scene::ImageScale;
-use damage_twin::train::trainer::evaluate_views;
+use damage_twin::train::evaluate::evaluate_views;
 use damage_twin::train::views::{load_views, split_views};
 
 use damage_twin::damage::TrainMode;

@@ -350,7 +350,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let peak_rss = peak_rss_mb();
     // Training-view PSNR on the final model (views reloaded: the job owned the first copies).
     let train_views = load_views(&dataset, &train_idx, args.run.scale, false)?;
-    let train_psnr = damage_twin::train::trainer::evaluate_views(
+    let train_psnr = damage_twin::train::evaluate::evaluate_views(
         &outcome.splats,
         &train_views,
         args.run.background,

@@ -381,7 +381,7 @@ fn heldout_psnr(
 ) -> Option<f64> {
     let mut views = load_views(dataset, indices, config.scale, true).ok()?;
     apply_mode(&mut views, config.mode, &config.palette);
-    crate::train::trainer::evaluate_views(splats, &views, config.background, splats.sh_degree)
+    crate::train::evaluate::evaluate_views(splats, &views, config.background, splats.sh_degree)
         .map(|s| s.psnr)
 }
 

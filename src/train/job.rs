@@ -9,9 +9,10 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::{Receiver, Sender, TryRecvError};
 
 use crate::splats::Splats;
+use crate::train::evaluate::EvalScores;
 use crate::train::priority;
 use crate::train::spec::{TrainSpec, TrainView};
-use crate::train::trainer::{EvalScores, StageTimes, Trainer};
+use crate::train::trainer::{StageTimes, Trainer};
 
 /// One progress report, sent after every step.
 #[derive(Clone, Debug)]

@@ -4,6 +4,7 @@
 
 pub mod adam;
 pub mod densify;
+pub mod evaluate;
 pub mod guards;
 pub mod job;
 pub mod loss;

@@ -6,6 +6,7 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 use crate::scene::{Camera, ImageScale, Mask, RgbImage};
+use crate::train::adam::{GroupFlags, LearningRates, ParamGroup};
 use crate::train::densify::DensifyConfig;
 
 /// Which parameter groups the optimiser may change. A group switched off keeps its values and
@@ -46,6 +47,21 @@ impl ParamGroups {
     };
 }
 
+impl ParamGroups {
+    /// The optimiser's per-group switches.
+    pub fn flags(&self) -> GroupFlags {
+        let mut flags = GroupFlags::ALL_ON;
+        flags.set(ParamGroup::Means, self.means);
+        flags.set(ParamGroup::LogScales, self.log_scales);
+        flags.set(ParamGroup::Rotations, self.rotations);
+        flags.set(ParamGroup::RawOpacities, self.raw_opacities);
+        flags.set(ParamGroup::ShDc, self.sh_dc);
+        flags.set(ParamGroup::ShRest, self.sh_rest);
+        flags.set(ParamGroup::RawLabels, self.raw_labels);
+        flags
+    }
+}
+
 impl Default for ParamGroups {
     fn default() -> Self {
         ParamGroups::ALL
@@ -66,6 +82,25 @@ pub struct LrOverrides {
     pub sh_dc: Option<f32>,
     pub sh_rest: Option<f32>,
     pub raw_labels: Option<f32>,
+}
+
+impl LrOverrides {
+    /// Replaces the rates this overrides in `lrs`.
+    pub fn apply(&self, lrs: &mut LearningRates) {
+        let set = |target: &mut f32, value: Option<f32>| {
+            if let Some(v) = value {
+                *target = v;
+            }
+        };
+        set(&mut lrs.position_init, self.means);
+        set(&mut lrs.position_final, self.means_final);
+        set(&mut lrs.log_scale, self.log_scales);
+        set(&mut lrs.rotation, self.rotations);
+        set(&mut lrs.opacity, self.raw_opacities);
+        set(&mut lrs.sh_dc, self.sh_dc);
+        set(&mut lrs.sh_rest, self.sh_rest);
+        set(&mut lrs.labels, self.raw_labels);
+    }
 }
 
 /// 3DGS adaptive density control with its windows fitted to a run of `iterations` steps: 3DGS
@@ -170,6 +205,23 @@ impl TrainSpec {
             background: Vec3::ZERO,
             seed: 0,
             eval_every: 0,
+        }
+    }
+
+    /// The density control this spec asks for, if any. The run's seed drives split sampling
+    /// too, so one seed fixes the whole run.
+    pub fn densify_config(&self) -> Option<DensifyConfig> {
+        let seed = self.seed ^ 0x5eed_de75_1f1e_0000;
+        match &self.densify {
+            DensifyPolicy::Off => None,
+            DensifyPolicy::Adaptive(config) => Some(DensifyConfig {
+                seed,
+                ..config.clone()
+            }),
+            DensifyPolicy::Budget { max } => Some(DensifyConfig {
+                budget: Some(*max),
+                ..densify_for_iterations(self.iterations, seed)
+            }),
         }
     }
 }

@@ -8,15 +8,15 @@ use std::time::Instant;
 use glam::Vec3;
 use serde::Serialize;
 
-use crate::metrics::psnr;
 use crate::raster::{Rasterizer, RenderOutput, RenderSettings, SplatGrads};
 use crate::splats::Splats;
-use crate::train::adam::{Adam, GroupFlags, LearningRates, ParamGrads, ParamGroup};
-use crate::train::densify::{Densifier, DensifyConfig, camera_extent};
+use crate::train::adam::{Adam, GroupFlags, LearningRates, ParamGrads};
+use crate::train::densify::{Densifier, camera_extent};
+use crate::train::evaluate::{EvalScores, evaluate_with};
 use crate::train::guards::{first_non_finite_grad, first_non_finite_param};
 use crate::train::loss::{LabelLossParams, LossWorkspace, label_loss, photometric_loss};
 use crate::train::schedule::sh_degree_for_step;
-use crate::train::spec::{DensifyPolicy, TrainSpec, TrainView, densify_for_iterations};
+use crate::train::spec::{TrainSpec, TrainView};
 
 /// Steps between rollback checkpoints (also taken after every density change). A rollback loses
 /// at most this many steps; a copy every 100 steps costs well under 1 % of training time.
@@ -50,15 +50,6 @@ pub enum TrainError {
     Splats(String),
     #[error("the initial splats contain NaN or Inf ({0})")]
     NonFinite(&'static str),
-}
-
-/// Held-out image quality.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct EvalScores {
-    /// Mean PSNR over views, dB.
-    pub psnr: f64,
-    pub ssim: f64,
-    pub views: usize,
 }
 
 /// Seconds spent per stage, summed over steps.
@@ -212,9 +203,11 @@ impl Trainer {
             position_max_steps: spec.iterations,
             ..LearningRates::default()
         };
-        apply_overrides(&mut lrs, &spec);
-        let groups = group_flags(&spec);
-        let densifier = densify_config(&spec).map(|config| Densifier::new(config, splats.len()));
+        spec.lr.apply(&mut lrs);
+        let groups = spec.groups.flags();
+        let densifier = spec
+            .densify_config()
+            .map(|config| Densifier::new(config, splats.len()));
         let adam = Adam::new(&splats);
         let regions = views
             .iter()
@@ -549,61 +542,13 @@ impl Trainer {
         )
     }
 
-    /// Test hook: corrupts one Gaussian's base colour so the next step that sees it, or the next
-    /// checkpoint, must roll back.
+    /// Test hook: corrupts one Gaussian's base colour. Projection culls it from then on, and the
+    /// full parameter scan before the next checkpoint must roll back.
     #[doc(hidden)]
     pub fn poison_for_test(&mut self, gaussian: usize) {
         let k3 = self.splats.sh_coeffs() * 3;
         self.splats.sh[gaussian * k3] = f32::NAN;
     }
-}
-
-/// Renders every view and averages PSNR and SSIM.
-fn evaluate_with(
-    rasterizer: &mut Rasterizer,
-    out: &mut RenderOutput,
-    splats: &Splats,
-    views: &[TrainView],
-    settings: &RenderSettings,
-) -> EvalScores {
-    let mut scores = EvalScores::default();
-    for view in views {
-        rasterizer.forward(splats, &view.camera, settings, out);
-        scores.psnr += psnr(&out.color, &view.image.data);
-        scores.ssim += crate::metrics::ssim(
-            &out.color,
-            &view.image.data,
-            view.image.width,
-            view.image.height,
-        );
-    }
-    let n = views.len().max(1) as f64;
-    scores.psnr /= n;
-    scores.ssim /= n;
-    scores.views = views.len();
-    scores
-}
-
-/// Mean PSNR and SSIM of a model over views (None when there are no views).
-pub fn evaluate_views(
-    splats: &Splats,
-    views: &[TrainView],
-    background: Vec3,
-    sh_degree: u32,
-) -> Option<EvalScores> {
-    if views.is_empty() {
-        return None;
-    }
-    let settings = RenderSettings::new(background, sh_degree.min(splats.sh_degree));
-    let mut rasterizer = Rasterizer::new();
-    let mut out = RenderOutput::default();
-    Some(evaluate_with(
-        &mut rasterizer,
-        &mut out,
-        splats,
-        views,
-        &settings,
-    ))
 }
 
 fn check_view(view: &TrainView, label_channels: usize) -> Result<(), TrainError> {
@@ -647,50 +592,4 @@ fn check_view(view: &TrainView, label_channels: usize) -> Result<(), TrainError>
         });
     }
     Ok(())
-}
-
-fn apply_overrides(lrs: &mut LearningRates, spec: &TrainSpec) {
-    let o = &spec.lr;
-    let set = |target: &mut f32, value: Option<f32>| {
-        if let Some(v) = value {
-            *target = v;
-        }
-    };
-    set(&mut lrs.position_init, o.means);
-    set(&mut lrs.position_final, o.means_final);
-    set(&mut lrs.log_scale, o.log_scales);
-    set(&mut lrs.rotation, o.rotations);
-    set(&mut lrs.opacity, o.raw_opacities);
-    set(&mut lrs.sh_dc, o.sh_dc);
-    set(&mut lrs.sh_rest, o.sh_rest);
-    set(&mut lrs.labels, o.raw_labels);
-}
-
-fn group_flags(spec: &TrainSpec) -> GroupFlags {
-    let g = &spec.groups;
-    let mut flags = GroupFlags::ALL_ON;
-    flags.set(ParamGroup::Means, g.means);
-    flags.set(ParamGroup::LogScales, g.log_scales);
-    flags.set(ParamGroup::Rotations, g.rotations);
-    flags.set(ParamGroup::RawOpacities, g.raw_opacities);
-    flags.set(ParamGroup::ShDc, g.sh_dc);
-    flags.set(ParamGroup::ShRest, g.sh_rest);
-    flags.set(ParamGroup::RawLabels, g.raw_labels);
-    flags
-}
-
-fn densify_config(spec: &TrainSpec) -> Option<DensifyConfig> {
-    // The run's seed drives split sampling too, so one seed fixes the whole run.
-    let seed = spec.seed ^ 0x5eed_de75_1f1e_0000;
-    match &spec.densify {
-        DensifyPolicy::Off => None,
-        DensifyPolicy::Adaptive(config) => Some(DensifyConfig {
-            seed,
-            ..config.clone()
-        }),
-        DensifyPolicy::Budget { max } => Some(DensifyConfig {
-            budget: Some(*max),
-            ..densify_for_iterations(spec.iterations, seed)
-        }),
-    }
 }

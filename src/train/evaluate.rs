@@ -1,0 +1,67 @@
+//! Image quality of a model over views: the held-out PSNR and SSIM that training reports and
+//! `eval` prints. Renders with the CPU rasterizer; reads no files.
+
+use glam::Vec3;
+use serde::Serialize;
+
+use crate::metrics::psnr;
+use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
+use crate::splats::Splats;
+use crate::train::spec::TrainView;
+
+/// Held-out image quality.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct EvalScores {
+    /// Mean PSNR over views, dB.
+    pub psnr: f64,
+    pub ssim: f64,
+    pub views: usize,
+}
+
+/// Renders every view and averages PSNR and SSIM.
+pub(crate) fn evaluate_with(
+    rasterizer: &mut Rasterizer,
+    out: &mut RenderOutput,
+    splats: &Splats,
+    views: &[TrainView],
+    settings: &RenderSettings,
+) -> EvalScores {
+    let mut scores = EvalScores::default();
+    for view in views {
+        rasterizer.forward(splats, &view.camera, settings, out);
+        scores.psnr += psnr(&out.color, &view.image.data);
+        scores.ssim += crate::metrics::ssim(
+            &out.color,
+            &view.image.data,
+            view.image.width,
+            view.image.height,
+        );
+    }
+    let n = views.len().max(1) as f64;
+    scores.psnr /= n;
+    scores.ssim /= n;
+    scores.views = views.len();
+    scores
+}
+
+/// Mean PSNR and SSIM of a model over views (None when there are no views).
+pub fn evaluate_views(
+    splats: &Splats,
+    views: &[TrainView],
+    background: Vec3,
+    sh_degree: u32,
+) -> Option<EvalScores> {
+    if views.is_empty() {
+        return None;
+    }
+    let settings = RenderSettings::new(background, sh_degree.min(splats.sh_degree));
+    let mut rasterizer = Rasterizer::new();
+    let mut out = RenderOutput::default();
+    Some(evaluate_with(
+        &mut rasterizer,
+        &mut out,
+        splats,
+        views,
+        &settings,
+    ))
+}
