@@ -48,7 +48,7 @@ pub fn tile_rect(mean2d: Vec2, radius: u32, extent: Vec2, tiles_x: u32, tiles_y:
 
 /// Sorts `depth bits << 32 | index` keys whose indices ascend, by depth then index: a stable
 /// LSD radix sort on the 32 depth bits (four byte passes, skipping a byte every key shares),
-/// since the keys arrive in index order. About four times faster than a comparison sort here.
+/// which is enough since the keys arrive in index order. Linear in the keys.
 fn radix_sort_by_depth(keys: &mut Vec<u64>, scratch: &mut Vec<u64>) {
     scratch.clear();
     scratch.resize(keys.len(), 0);

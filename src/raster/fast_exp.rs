@@ -1,7 +1,7 @@
 //! A branch-free `2^x` for the blending loops: the same bits on every lane width, so the forward
 //! and backward (and SSE and AVX builds) make identical skip/stop decisions, and it vectorises.
 //! Only for the Gaussian falloff, whose exponent the caller pre-scales by log2(e) (folded into
-//! the conic once per Gaussian): that saves the range reduction's multiplies on every pixel.
+//! the conic once per row segment): that saves the range reduction's multiplies on every pixel.
 
 /// `log2(e)`: `exp(x) = 2^(x · LOG2_E)`.
 pub(crate) const LOG2_E: f32 = std::f32::consts::LOG2_E;

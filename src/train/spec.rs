@@ -45,9 +45,7 @@ impl ParamGroups {
         sh_rest: false,
         raw_labels: true,
     };
-}
 
-impl ParamGroups {
     /// The optimiser's per-group switches.
     pub fn flags(&self) -> GroupFlags {
         let mut flags = GroupFlags::ALL_ON;
