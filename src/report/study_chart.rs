@@ -13,6 +13,11 @@ use crate::damage::{DamageClass, TrainMode};
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
+/// Height in pixels of the legend strip under each row of panels.
+const LEGEND_HEIGHT: i32 = 34;
+/// The corrupted inputs' colour.
+const GREY: RGBColor = RGBColor(90, 90, 90);
+
 fn classes(rows: &[StudyRow]) -> Vec<DamageClass> {
     DamageClass::ALL
         .into_iter()
@@ -106,59 +111,116 @@ where
         Views::All => series(rows, class, None, |r| r.input_iou),
         Views::Corrupted => series(rows, class, None, |r| r.input_iou_noisy_views),
     };
-    let grey = RGBColor(90, 90, 90);
-    chart
-        .draw_series(LineSeries::new(input.iter().copied(), grey.stroke_width(2)))?
-        .label("corrupted input masks")
-        .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], grey.stroke_width(2)));
+    chart.draw_series(LineSeries::new(input.iter().copied(), GREY.stroke_width(2)))?;
     chart.draw_series(
         input
             .iter()
-            .map(|&p| Cross::new(p, 5, grey.stroke_width(2))),
+            .map(|&p| Cross::new(p, 5, GREY.stroke_width(2))),
     )?;
     for mode in modes(rows) {
         let colour = mode_colour(mode);
         if views == Views::Corrupted {
             let twin = series(rows, class, Some(mode), |r| r.twin_iou_noisy_views);
-            chart
-                .draw_series(LineSeries::new(
-                    twin.iter().copied(),
-                    colour.stroke_width(3),
-                ))?
-                .label(format!("twin, {mode} mode, same views"))
-                .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 18, y)], colour.stroke_width(3))
-                });
+            chart.draw_series(LineSeries::new(
+                twin.iter().copied(),
+                colour.stroke_width(3),
+            ))?;
             chart.draw_series(twin.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
             continue;
         }
         let heldout = series(rows, class, Some(mode), |r| r.twin_iou_heldout);
-        chart
-            .draw_series(LineSeries::new(
-                heldout.iter().copied(),
-                colour.stroke_width(3),
-            ))?
-            .label(format!("twin, {mode} mode, held-out views"))
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], colour.stroke_width(3)));
+        chart.draw_series(LineSeries::new(
+            heldout.iter().copied(),
+            colour.stroke_width(3),
+        ))?;
         chart.draw_series(heldout.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
         let train = series(rows, class, Some(mode), |r| r.twin_iou_train);
-        let light = colour.mix(0.6);
-        chart
-            .draw_series(DashedLineSeries::new(
-                train.iter().copied(),
-                6,
-                4,
-                light.stroke_width(2),
-            ))?
-            .label(format!("twin, {mode} mode, training views"))
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], light.stroke_width(2)));
+        chart.draw_series(DashedLineSeries::new(
+            train.iter().copied(),
+            6,
+            4,
+            colour.mix(0.6).stroke_width(2),
+        ))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.3))
-        .draw()?;
+    Ok(())
+}
+
+/// How a legend entry's sample is drawn.
+#[derive(Clone, Copy)]
+enum Sample {
+    /// Grey line with crosses (the inputs).
+    Input,
+    /// Solid line with dots, in the mode's colour.
+    Solid(RGBColor),
+    /// Light dashed line, in the mode's colour.
+    Dashed(RGBColor),
+}
+
+/// The legend of one row of panels: the panels themselves carry none, so no box hides a line.
+fn legend_entries(rows: &[StudyRow], views: Views) -> Vec<(Sample, String)> {
+    let mut entries = vec![(Sample::Input, "corrupted input masks".to_string())];
+    for mode in modes(rows) {
+        let colour = mode_colour(mode);
+        match views {
+            Views::All => {
+                entries.push((
+                    Sample::Solid(colour),
+                    format!("twin, {mode} mode, held-out views"),
+                ));
+                entries.push((
+                    Sample::Dashed(colour),
+                    format!("twin, {mode} mode, training views"),
+                ));
+            }
+            Views::Corrupted => {
+                entries.push((
+                    Sample::Solid(colour),
+                    format!("twin, {mode} mode, same views"),
+                ));
+            }
+        }
+    }
+    entries
+}
+
+/// Draws the entries side by side across a strip.
+fn legend_strip<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    entries: &[(Sample, String)],
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let (width, height) = area.dim_in_pixel();
+    let slot = width as i32 / entries.len().max(1) as i32;
+    let y = height as i32 / 2;
+    for (k, (sample, label)) in entries.iter().enumerate() {
+        let x = k as i32 * slot + 24;
+        let line = [(x, y), (x + 34, y)];
+        match *sample {
+            Sample::Input => {
+                area.draw(&PathElement::new(line, GREY.stroke_width(2)))?;
+                area.draw(&Cross::new((x + 17, y), 5, GREY.stroke_width(2)))?;
+            }
+            Sample::Solid(colour) => {
+                area.draw(&PathElement::new(line, colour.stroke_width(3)))?;
+                area.draw(&Circle::new((x + 17, y), 4, colour.filled()))?;
+            }
+            Sample::Dashed(colour) => {
+                for (a, b) in [(0, 10), (14, 24), (28, 34)] {
+                    area.draw(&PathElement::new(
+                        [(x + a, y), (x + b, y)],
+                        colour.mix(0.6).stroke_width(2),
+                    ))?;
+                }
+            }
+        }
+        area.draw(&Text::new(
+            label.clone(),
+            (x + 42, y - 8),
+            ("sans-serif", 15),
+        ))?;
+    }
     Ok(())
 }
 
@@ -168,10 +230,20 @@ where
 {
     root.fill(&WHITE)?;
     let classes = classes(rows);
-    let areas = root.split_evenly((2, classes.len().max(1)));
-    for (k, class) in classes.iter().enumerate() {
-        panel(&areas[k], rows, *class, Views::All)?;
-        panel(&areas[classes.len() + k], rows, *class, Views::Corrupted)?;
+    let (_, height) = root.dim_in_pixel();
+    let row_height = (height as i32 - 2 * LEGEND_HEIGHT) / 2;
+    let (top, rest) = root.split_vertically(row_height);
+    let (top_legend, rest) = rest.split_vertically(LEGEND_HEIGHT);
+    let (bottom, bottom_legend) = rest.split_vertically(row_height);
+    for (views, row, legend) in [
+        (Views::All, top, top_legend),
+        (Views::Corrupted, bottom, bottom_legend),
+    ] {
+        let areas = row.split_evenly((1, classes.len().max(1)));
+        for (area, class) in areas.iter().zip(&classes) {
+            panel(area, rows, *class, views)?;
+        }
+        legend_strip(&legend, &legend_entries(rows, views))?;
     }
     root.present()?;
     Ok(())
@@ -274,4 +346,37 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
         );
     }
     text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(serde::Deserialize)]
+    struct Study {
+        rows: Vec<StudyRow>,
+    }
+
+    #[test]
+    fn the_chart_has_one_legend_per_row_of_panels_and_none_inside_them() {
+        let json = include_str!("../../docs/figures/mask-noise-study.json");
+        let study: Study = serde_json::from_str(json).expect("the study in docs/ parses");
+        let dir = tempfile::tempdir().expect("temp dir");
+        let files = write_study_chart(dir.path(), "study", &study.rows).expect("chart drawn");
+        assert_eq!(files.len(), 2);
+        for f in &files {
+            let bytes = std::fs::metadata(f).expect("chart written").len();
+            assert!(bytes > 10_000, "{} is only {bytes} bytes", f.display());
+        }
+        let svg = std::fs::read_to_string(&files[1]).expect("svg");
+        // Three panels per row, one legend strip per row: each label twice in all (inputs) or
+        // once (the row-specific twin entries), never once per panel.
+        assert_eq!(svg.matches("corrupted input masks").count(), 2);
+        assert_eq!(svg.matches("twin, label mode, held-out views").count(), 1);
+        assert_eq!(svg.matches("twin, overlay mode, same views").count(), 1);
+        assert_eq!(
+            svg.matches("IoU on the corrupted training views").count(),
+            3
+        );
+    }
 }
