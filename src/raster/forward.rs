@@ -125,7 +125,7 @@ fn rasterize_tile_impl(
     masks: &mut [u32],
     seg_vis: &mut [f32],
     splats: &[Splat2d],
-    projected: &Projected,
+    isect_labels: &[f32],
     bins: &TileBins,
     labels: usize,
     alpha_max: f32,
@@ -155,9 +155,8 @@ fn rasterize_tile_impl(
         if n % 32 == 31 && !any_live(t_buf) {
             break;
         }
-        let g = ids[n] as usize;
         let sp = splats[n];
-        let label_values = &projected.labels[g * labels..(g + 1) * labels];
+        let label_values = &isect_labels[n * labels..(n + 1) * labels];
         let todo = masks[n];
         // Two passes over the segments: first every falloff (independent of the tile state, so
         // the out-of-order core overlaps their exp chains), then the blends.
@@ -254,7 +253,7 @@ simd_dispatch!(
         masks: &mut [u32],
         seg_vis: &mut [f32],
         splats: &[Splat2d],
-        projected: &Projected,
+        isect_labels: &[f32],
         bins: &TileBins,
         labels: usize,
         alpha_max: f32,
@@ -276,19 +275,19 @@ pub(crate) fn rasterize(
     let stride = state_channels(labels) * TILE_PIXELS;
     // Sized only: every tile zeroes its own slice first (`rasterize_tile_impl`).
     state.resize(bins.tile_count() * stride, 0.0);
-    segments.prepare(projected, bins, settings.alpha_threshold);
+    segments.prepare(projected, bins, labels, settings.alpha_threshold);
     state
         .par_chunks_mut(stride)
         .zip(segments.tiles_mut(bins))
         .enumerate()
-        .for_each(|(tile, (st, (masks, vis, splats)))| {
+        .for_each(|(tile, (st, parts))| {
             rasterize_tile(
                 tile,
                 st,
-                masks,
-                vis,
-                splats,
-                projected,
+                parts.masks,
+                parts.vis,
+                parts.splats,
+                parts.labels,
                 bins,
                 labels,
                 settings.alpha_max,

@@ -103,7 +103,7 @@ fn backward_tile_impl<const HAS_LABELS: bool>(
     masks: &[u32],
     seg_vis: &[f32],
     splats: &[Splat2d],
-    projected: &Projected,
+    isect_labels: &[f32],
     bins: &TileBins,
     inputs: &TileInputs,
     labels: usize,
@@ -124,17 +124,16 @@ fn backward_tile_impl<const HAS_LABELS: bool>(
     let mut ok = [false; LANES];
     let mut w = [0.0f32; LANES];
     let mut cg = [0.0f32; LANES];
-    let ids = &bins.gaussian_ids[start as usize..end as usize];
+    debug_assert_eq!(masks.len(), (end - start) as usize);
     let mut vis_pos = 0;
-    for (n, (&g, &mask)) in ids.iter().zip(masks).enumerate() {
+    for (n, &mask) in masks.iter().enumerate() {
         if mask == 0 {
             // Blended nowhere in the forward: its gradient slots stay zero.
             continue;
         }
-        let g = g as usize;
         let isect_out = &mut out[n * stride..(n + 1) * stride];
         let sp = splats[n];
-        let label_values = &projected.labels[g * labels..(g + 1) * labels];
+        let label_values = &isect_labels[n * labels..(n + 1) * labels];
         let mut s_dx = [0.0f32; LANES];
         let mut s_dy = [0.0f32; LANES];
         let mut s_dxdx = [0.0f32; LANES];
@@ -272,7 +271,7 @@ fn backward_tile_kernel(
     masks: &[u32],
     seg_vis: &[f32],
     splats: &[Splat2d],
-    projected: &Projected,
+    isect_labels: &[f32],
     bins: &TileBins,
     inputs: &TileInputs,
     labels: usize,
@@ -280,11 +279,29 @@ fn backward_tile_kernel(
 ) {
     if labels > 0 {
         backward_tile_impl::<true>(
-            tile, out, masks, seg_vis, splats, projected, bins, inputs, labels, alpha_max,
+            tile,
+            out,
+            masks,
+            seg_vis,
+            splats,
+            isect_labels,
+            bins,
+            inputs,
+            labels,
+            alpha_max,
         )
     } else {
         backward_tile_impl::<false>(
-            tile, out, masks, seg_vis, splats, projected, bins, inputs, labels, alpha_max,
+            tile,
+            out,
+            masks,
+            seg_vis,
+            splats,
+            isect_labels,
+            bins,
+            inputs,
+            labels,
+            alpha_max,
         )
     }
 }
@@ -297,7 +314,7 @@ simd_dispatch!(
         masks: &[u32],
         seg_vis: &[f32],
         splats: &[Splat2d],
-        projected: &Projected,
+        isect_labels: &[f32],
         bins: &TileBins,
         inputs: &TileInputs,
         labels: usize,
@@ -366,7 +383,7 @@ pub(crate) fn rasterize_backward(
                 &segments.masks[start as usize..end as usize],
                 segments.tile_vis(tile),
                 &segments.splats[start as usize..end as usize],
-                projected,
+                &segments.labels[start as usize * labels..end as usize * labels],
                 bins,
                 inputs,
                 labels,

@@ -11,6 +11,14 @@ use crate::simd::simd_dispatch;
 
 const TS: usize = TILE_SIZE as usize;
 
+/// One tile's share of the store, as the forward uses it.
+pub(crate) struct TileParts<'a> {
+    pub masks: &'a mut [u32],
+    pub vis: &'a mut [f32],
+    pub splats: &'a [Splat2d],
+    pub labels: &'a [f32],
+}
+
 /// What the forward leaves for the backward, sized once per frame by [`SegmentStore::prepare`].
 #[derive(Debug, Default)]
 pub(crate) struct SegmentStore {
@@ -20,6 +28,9 @@ pub(crate) struct SegmentStore {
     /// Per intersection its projected Gaussian, copied in tile and depth order: the blend loops
     /// then stream through it instead of missing the cache on every Gaussian of a tile.
     pub splats: Vec<Splat2d>,
+    /// Per intersection its label probabilities (`label_channels` each), in the same order.
+    pub labels: Vec<f32>,
+    label_channels: usize,
     /// Per tile its first float in `vis` (`tiles + 1` entries): room for 8 lanes of every
     /// segment the tile's intersections can touch.
     offsets: Vec<usize>,
@@ -34,7 +45,13 @@ pub(crate) struct SegmentStore {
 impl SegmentStore {
     /// Computes every intersection's segment mask and reserves exact room for the stored
     /// falloffs (a per-tile growing buffer kept the worst case of every view, twice over).
-    pub fn prepare(&mut self, projected: &Projected, bins: &TileBins, alpha_threshold: f32) {
+    pub fn prepare(
+        &mut self,
+        projected: &Projected,
+        bins: &TileBins,
+        label_channels: usize,
+        alpha_threshold: f32,
+    ) {
         let tiles = bins.tile_count();
         self.power_max.clear();
         self.power_max.resize(projected.opacities.len(), 0.0);
@@ -58,6 +75,19 @@ impl SegmentStore {
             .for_each(|(tile, ((masks, splats), count))| {
                 *count = tile_masks(tile, masks, splats, projected, bins, power_max) * LANES;
             });
+        let l = label_channels;
+        self.label_channels = l;
+        self.labels.clear();
+        self.labels.resize(bins.gaussian_ids.len() * l, 0.0);
+        if l > 0 {
+            self.labels
+                .par_chunks_mut(l)
+                .zip(bins.gaussian_ids.par_iter())
+                .for_each(|(dst, &g)| {
+                    let g = g as usize;
+                    dst.copy_from_slice(&projected.labels[g * l..(g + 1) * l]);
+                });
+        }
         self.offsets.clear();
         let mut total = 0;
         self.offsets.push(0);
@@ -73,8 +103,9 @@ impl SegmentStore {
     }
 
     /// Per tile its masks and its room for falloffs, disjoint, for the forward to fill, and its
-    /// intersections' Gaussians.
-    pub fn tiles_mut(&mut self, bins: &TileBins) -> Vec<(&mut [u32], &mut [f32], &[Splat2d])> {
+    /// intersections' Gaussians and label probabilities.
+    pub fn tiles_mut(&mut self, bins: &TileBins) -> Vec<TileParts<'_>> {
+        let l = self.label_channels;
         let masks = bins.split_by_tile(&mut self.masks, 1);
         let mut rest = &mut self.vis[..];
         let mut parts = Vec::with_capacity(masks.len());
@@ -84,7 +115,13 @@ impl SegmentStore {
             .zip(&bins.tile_ranges)
         {
             let (head, tail) = rest.split_at_mut(w[1] - w[0]);
-            parts.push((m, head, &self.splats[*start as usize..*end as usize]));
+            let (start, end) = (*start as usize, *end as usize);
+            parts.push(TileParts {
+                masks: m,
+                vis: head,
+                splats: &self.splats[start..end],
+                labels: &self.labels[start * l..end * l],
+            });
             rest = tail;
         }
         parts
