@@ -1,6 +1,7 @@
 //! Which row segments (8 pixels of one tile row) each intersection can touch, and the store the
 //! forward fills for the backward: per intersection the segments it blended into, per tile the
-//! `exp(-power)` of their lanes. It must not blend.
+//! `exp(-power)` of their lanes. It also copies each intersection's projected Gaussian and label
+//! probabilities in tile and depth order, which both blends stream through. It must not blend.
 
 use rayon::prelude::*;
 
