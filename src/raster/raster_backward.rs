@@ -277,33 +277,24 @@ fn backward_tile_kernel(
     labels: usize,
     alpha_max: f32,
 ) {
-    if labels > 0 {
-        backward_tile_impl::<true>(
-            tile,
-            out,
-            masks,
-            seg_vis,
-            splats,
-            isect_labels,
-            bins,
-            inputs,
-            labels,
-            alpha_max,
-        )
-    } else {
-        backward_tile_impl::<false>(
-            tile,
-            out,
-            masks,
-            seg_vis,
-            splats,
-            isect_labels,
-            bins,
-            inputs,
-            labels,
-            alpha_max,
-        )
+    // One argument list for both instantiations.
+    macro_rules! run {
+        ($has_labels:literal) => {
+            backward_tile_impl::<$has_labels>(
+                tile,
+                out,
+                masks,
+                seg_vis,
+                splats,
+                isect_labels,
+                bins,
+                inputs,
+                labels,
+                alpha_max,
+            )
+        };
     }
+    if labels > 0 { run!(true) } else { run!(false) }
 }
 
 simd_dispatch!(
