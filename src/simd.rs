@@ -1,48 +1,95 @@
 //! Runtime CPU-feature dispatch shared by the CPU hot loops (rasterizer, SSIM, Adam).
 
+/// How a kernel computes `a · b + c`: kernels generic over it are built with [`Fused`] (one
+/// rounding, one instruction) in the AVX builds and with [`Separate`] (two roundings) in the
+/// baseline one, where `f32::mul_add` would be a libm call per lane. Both directions of a
+/// computation that must agree bit for bit run in the same build.
+pub(crate) trait MulAdd {
+    fn mul_add(a: f32, b: f32, c: f32) -> f32;
+}
+
+/// `a · b + c` rounded once (an FMA instruction where the build enables `fma`).
+pub(crate) struct Fused;
+
+/// `a · b + c` rounded twice: the multiply, then the add.
+pub(crate) struct Separate;
+
+impl MulAdd for Fused {
+    #[inline(always)]
+    fn mul_add(a: f32, b: f32, c: f32) -> f32 {
+        a.mul_add(b, c)
+    }
+}
+
+impl MulAdd for Separate {
+    #[inline(always)]
+    fn mul_add(a: f32, b: f32, c: f32) -> f32 {
+        a * b + c
+    }
+}
+
 /// Defines `$name`, which runs the `#[inline(always)]` kernel `$kernel` compiled for AVX-512VL
-/// or else AVX2 when the CPU has it (8-lane vectors instead of baseline SSE2's 4), and the
-/// baseline build otherwise. Kernels that add in a fixed order and use no FMA give the same bits
-/// on every path.
+/// or else AVX2 (both with FMA) when the CPU has it (8-lane vectors instead of baseline SSE2's
+/// 4), and the baseline build otherwise. Kernels that add in a fixed order and use no FMA give
+/// the same bits on every path. A kernel written `$kernel::<MulAdd>` is generic over
+/// [`MulAdd`]: it gets [`Fused`] in the AVX builds and [`Separate`] in the baseline one, so its
+/// bits depend on the CPU (still the same for any thread count on one machine).
 /// Attributes and doc comments before `$name` are kept.
 macro_rules! simd_dispatch {
     (
         $(#[$meta:meta])*
         $name:ident => $kernel:ident ( $($arg:ident : $ty:ty),* $(,)? ) $(-> $ret:ty)?
     ) => {
+        $crate::simd::simd_dispatch!(@build [$(#[$meta])*] $name
+            [$kernel] [$kernel] ($($arg : $ty),*) $(-> $ret)?);
+    };
+    (
+        $(#[$meta:meta])*
+        $name:ident => $kernel:ident :: <MulAdd> ( $($arg:ident : $ty:ty),* $(,)? ) $(-> $ret:ty)?
+    ) => {
+        $crate::simd::simd_dispatch!(@build [$(#[$meta])*] $name
+            [$kernel::<$crate::simd::Fused>] [$kernel::<$crate::simd::Separate>]
+            ($($arg : $ty),*) $(-> $ret)?);
+    };
+    (
+        @build [$(#[$meta:meta])*] $name:ident [$($fast:tt)*] [$($base:tt)*]
+        ( $($arg:ident : $ty:ty),* ) $(-> $ret:ty)?
+    ) => {
         $(#[$meta])*
         #[allow(clippy::too_many_arguments)]
         fn $name($($arg: $ty),*) $(-> $ret)? {
             #[cfg(target_arch = "x86_64")]
             {
-                #[target_feature(enable = "avx2")]
+                #[target_feature(enable = "avx2,fma")]
                 #[allow(clippy::too_many_arguments)]
                 fn avx2($($arg: $ty),*) $(-> $ret)? {
-                    $kernel($($arg),*)
+                    $($fast)*($($arg),*)
                 }
                 // The same 8-lane code with AVX-512VL's encodings: 32 vector registers instead
                 // of 16 (the blend loops keep their polynomial constants in registers instead
-                // of reloading them) and mask registers for the compares. Still no FMA
-                // contraction (Rust never fuses), so the bits match the other paths.
-                #[target_feature(enable = "avx2,avx512f,avx512vl")]
+                // of reloading them) and mask registers for the compares. Rust never contracts
+                // `a * b + c` into an FMA: only explicit `MulAdd::mul_add` calls become one.
+                #[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
                 #[allow(clippy::too_many_arguments)]
                 fn avx512($($arg: $ty),*) $(-> $ret)? {
-                    $kernel($($arg),*)
+                    $($fast)*($($arg),*)
                 }
-                if std::arch::is_x86_feature_detected!("avx512f")
+                let avx2_fma = std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("fma");
+                if avx2_fma
+                    && std::arch::is_x86_feature_detected!("avx512f")
                     && std::arch::is_x86_feature_detected!("avx512vl")
-                    && std::arch::is_x86_feature_detected!("avx2")
                 {
-                    // SAFETY: the CPU supports AVX2, AVX-512F and AVX-512VL (checked just
+                    // SAFETY: the CPU supports AVX2, FMA, AVX-512F and AVX-512VL (checked just
                     // above), every feature this build enables.
                     return unsafe { avx512($($arg),*) };
                 }
-                if std::arch::is_x86_feature_detected!("avx2") {
-                    // SAFETY: the CPU supports AVX2 (checked just above).
+                if avx2_fma {
+                    // SAFETY: the CPU supports AVX2 and FMA (checked just above).
                     return unsafe { avx2($($arg),*) };
                 }
             }
-            $kernel($($arg),*)
+            $($base)*($($arg),*)
         }
     };
 }

@@ -6,10 +6,10 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::bin::TileBins;
-use super::fast_exp::{LOG2_E, fast_exp2};
+use super::fast_exp::{LOG2_E, exp2_parts};
 use super::segments::SegmentStore;
 use super::{Projected, RenderOutput, RenderSettings, TILE_PIXELS, TILE_SIZE, TRANSMITTANCE_MIN};
-use crate::simd::simd_dispatch;
+use crate::simd::{MulAdd, simd_dispatch};
 
 /// Pixels evaluated together (one AVX register of f32).
 pub(crate) const LANES: usize = 8;
@@ -56,32 +56,91 @@ impl Splat2d {
     }
 }
 
-/// Per lane of a row segment starting at pixel-centre x `x0`: the clamped alpha, and
-/// `exp(-power)` where the pixel passes gsplat's `sigma < 0 || alpha < 1/255` skip, -1 where it
-/// does not. The forward stores the latter for the backward to replay ([`replay_falloff`]), so
-/// both take identical decisions bit for bit.
+/// Pixel-centre offsets within a tile, `i + 0.5` for column or row `i`: a table, so the blend
+/// loops convert no integers (the same bits as `origin + i as f32 + 0.5`).
+pub(crate) const CENTRES: [f32; TS] = {
+    let mut c = [0.5f32; TS];
+    let mut i = 0;
+    while i < TS {
+        c[i] = i as f32 + 0.5;
+        i += 1;
+    }
+    c
+};
+
+/// Per half of a tile row (pixels 0..8 and 8..16), each lane's `d = mean.x - x` for a Gaussian
+/// over the tile whose left edge is `ox`: the same for every row it covers.
 #[inline(always)]
-pub(crate) fn falloff(
-    sp: &Splat2d,
-    x0: f32,
+pub(crate) fn lane_offsets(sp: &Splat2d, ox: f32) -> [[f32; LANES]; 2] {
+    let mut d = [[0.0f32; LANES]; 2];
+    for (h, half) in d.iter_mut().enumerate() {
+        for (l, dl) in half.iter_mut().enumerate() {
+            *dl = sp.mx - (ox + CENTRES[h * LANES + l]);
+        }
+    }
+    d
+}
+
+/// What every row segment of one intersection shares for its falloff, scaled by log2(e) and
+/// negated: per half row the lanes' `d` and `-a d² / 2`, and the conic's other two terms. Once
+/// per intersection, so a segment adds only its row's terms.
+pub(crate) struct RowTerms {
+    d: [[f32; LANES]; 2],
+    neg_quad: [[f32; LANES]; 2],
+    neg_b: f32,
+    neg_c_half: f32,
+    opacity: f32,
+}
+
+impl RowTerms {
+    #[inline(always)]
+    pub fn new(sp: &Splat2d, ox: f32) -> Self {
+        let d = lane_offsets(sp, ox);
+        let neg_a_half = -0.5 * LOG2_E * sp.a;
+        let mut neg_quad = [[0.0f32; LANES]; 2];
+        for h in 0..2 {
+            for l in 0..LANES {
+                neg_quad[h][l] = neg_a_half * d[h][l] * d[h][l];
+            }
+        }
+        RowTerms {
+            d,
+            neg_quad,
+            neg_b: -LOG2_E * sp.b,
+            neg_c_half: -0.5 * LOG2_E * sp.c,
+            opacity: sp.opacity,
+        }
+    }
+}
+
+/// Per lane of the row segment `half` (0 or 1) at vertical offset `dy = mean.y - y`: the clamped
+/// alpha, and `exp(-power)` where the pixel passes gsplat's `sigma < 0 || alpha < 1/255` skip,
+/// -1 where it does not. The forward stores the latter for the backward to replay
+/// ([`replay_falloff`]), so both take identical decisions bit for bit.
+#[inline(always)]
+pub(crate) fn falloff<F: MulAdd>(
+    terms: &RowTerms,
+    half: usize,
     dy: f32,
     alpha_max: f32,
     alpha_threshold: f32,
     alpha: &mut [f32; LANES],
     stored: &mut [f32; LANES],
 ) {
-    // sigma · log2(e) = d (a' d + b' dy) + c' dy² with the conic pre-scaled once per segment.
-    let a_half = 0.5 * LOG2_E * sp.a;
-    let b_dy = LOG2_E * sp.b * dy;
-    let c_dy2_half = 0.5 * LOG2_E * sp.c * dy * dy;
+    // -sigma · log2(e) = d (-b' dy) + (-a' d² / 2 - c' dy² / 2): one add and one multiply-add
+    // per lane on the chain the segment waits on.
+    let neg_b_dy = terms.neg_b * dy;
+    let neg_c_dy2_half = terms.neg_c_half * dy * dy;
+    let (d, neg_quad) = (&terms.d[half], &terms.neg_quad[half]);
     for l in 0..LANES {
-        let d = sp.mx - (x0 + l as f32);
-        let sigma = d * (a_half * d + b_dy) + c_dy2_half;
-        let e = fast_exp2(-sigma);
-        let raw = sp.opacity * e;
+        let neg_sigma = F::mul_add(d[l], neg_b_dy, neg_quad[l] + neg_c_dy2_half);
+        // The opacity is folded into the power of two beside the polynomial, off its chain.
+        let (mantissa, scale) = exp2_parts::<F>(neg_sigma);
+        let e = mantissa * scale;
+        let raw = mantissa * (scale * terms.opacity);
         let al = if raw < alpha_max { raw } else { alpha_max };
         alpha[l] = al;
-        stored[l] = if sigma >= 0.0 && al >= alpha_threshold {
+        stored[l] = if neg_sigma <= 0.0 && al >= alpha_threshold {
             e
         } else {
             -1.0
@@ -90,16 +149,13 @@ pub(crate) fn falloff(
 }
 
 /// [`falloff`] replayed from the values the forward stored for a segment: `exp(-power)` where
-/// the pixel passed the skip test, -1 where it did not. The same bits as `falloff` without a
-/// second exponential (the backward's longest dependency chain).
+/// the pixel passed the skip test, -1 where it did not. The same decisions as `falloff` without
+/// a second exponential (the backward's longest dependency chain).
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn replay_falloff(
-    sp: &Splat2d,
-    x0: f32,
+    opacity: f32,
     stored: &[f32; LANES],
     alpha_max: f32,
-    dx: &mut [f32; LANES],
     vis: &mut [f32; LANES],
     raw_alpha: &mut [f32; LANES],
     alpha: &mut [f32; LANES],
@@ -107,8 +163,7 @@ pub(crate) fn replay_falloff(
 ) {
     for l in 0..LANES {
         let e = stored[l];
-        let raw = sp.opacity * e;
-        dx[l] = sp.mx - (x0 + l as f32);
+        let raw = opacity * e;
         vis[l] = e;
         raw_alpha[l] = raw;
         alpha[l] = if raw < alpha_max { raw } else { alpha_max };
@@ -119,7 +174,7 @@ pub(crate) fn replay_falloff(
 /// Blends one tile into its planar state slice (`state_channels(L) * 256` floats).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn rasterize_tile_impl(
+fn rasterize_tile_impl<F: MulAdd>(
     tile: usize,
     state: &mut [f32],
     masks: &mut [u32],
@@ -158,6 +213,7 @@ fn rasterize_tile_impl(
         let sp = splats[n];
         let label_values = &isect_labels[n * labels..(n + 1) * labels];
         let todo = masks[n];
+        let terms = RowTerms::new(&sp, ox);
         // Two passes over the segments: first every falloff (independent of the tile state, so
         // the out-of-order core overlaps their exp chains), then the blends.
         let count = todo.count_ones() as usize;
@@ -165,11 +221,10 @@ fn rasterize_tile_impl(
         for k in 0..count {
             let s = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            let (y, half) = (s / 2, (s % 2) * LANES);
-            let dy = sp.my - (oy + y as f32 + 0.5);
-            falloff(
-                &sp,
-                ox + half as f32 + 0.5,
+            let dy = sp.my - (oy + CENTRES[s / 2]);
+            falloff::<F>(
+                &terms,
+                s % 2,
                 dy,
                 alpha_max,
                 alpha_threshold,
@@ -217,15 +272,15 @@ fn rasterize_tile_impl(
             vis_pos += LANES;
             *stored = *stored_k;
             for l in 0..LANES {
-                r_buf[base + l] += w[l] * sp.color.x;
-                g_buf[base + l] += w[l] * sp.color.y;
-                b_buf[base + l] += w[l] * sp.color.z;
-                depth_buf[base + l] += w[l] * sp.depth;
+                r_buf[base + l] = F::mul_add(w[l], sp.color.x, r_buf[base + l]);
+                g_buf[base + l] = F::mul_add(w[l], sp.color.y, g_buf[base + l]);
+                b_buf[base + l] = F::mul_add(w[l], sp.color.z, b_buf[base + l]);
+                depth_buf[base + l] = F::mul_add(w[l], sp.depth, depth_buf[base + l]);
             }
             for (c, &p) in label_values.iter().enumerate() {
                 let seg = &mut label_buf[c * TILE_PIXELS + base..c * TILE_PIXELS + base + LANES];
                 for l in 0..LANES {
-                    seg[l] += w[l] * p;
+                    seg[l] = F::mul_add(w[l], p, seg[l]);
                 }
             }
         }
@@ -247,7 +302,7 @@ pub(crate) fn any_live(t: &[f32]) -> bool {
 
 simd_dispatch!(
     /// [`rasterize_tile_impl`] with AVX2 (or AVX-512VL) where the CPU has it.
-    rasterize_tile => rasterize_tile_impl(
+    rasterize_tile => rasterize_tile_impl::<MulAdd>(
         tile: usize,
         state: &mut [f32],
         masks: &mut [u32],

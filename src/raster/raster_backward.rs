@@ -8,14 +8,15 @@ use rayon::prelude::*;
 
 use super::bin::TileBins;
 use super::forward::{
-    CH_DEPTH, CH_LABELS, CH_RGB, CH_T, LANES, Splat2d, replay_falloff, state_channels,
+    CENTRES, CH_DEPTH, CH_LABELS, CH_RGB, CH_T, LANES, Splat2d, lane_offsets, replay_falloff,
+    state_channels,
 };
 use super::segments::SegmentStore;
 use super::{
     MAX_LABEL_CHANNELS, PixelGrads, Projected, RenderSettings, ScreenGrads, TILE_PIXELS, TILE_SIZE,
     TRANSMITTANCE_MIN,
 };
-use crate::simd::simd_dispatch;
+use crate::simd::{MulAdd, simd_dispatch};
 
 const TS: usize = TILE_SIZE as usize;
 
@@ -35,11 +36,10 @@ struct TileInputs {
     /// dL/d(R, G, B, depth) per pixel.
     v_chan: [[f32; TILE_PIXELS]; 4],
     v_labels: [[f32; TILE_PIXELS]; MAX_LABEL_CHANNELS],
-    /// `sum_k C_k g_k` over every blended channel (background excluded).
-    total_dot: [f32; TILE_PIXELS],
-    /// `v_alpha - background · v_rgb`: what `T_final` is worth.
-    v_t_final: [f32; TILE_PIXELS],
-    t_final: [f32; TILE_PIXELS],
+    /// `sum_k C_k g_k` over every blended channel (background excluded), less what the final
+    /// transmittance is worth, `T_final · (v_alpha - background · v_rgb)`: the replay subtracts
+    /// its running prefix from this to get what lies behind each Gaussian.
+    behind: [f32; TILE_PIXELS],
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -59,7 +59,6 @@ fn gather_inputs(
     for p in 0..TILE_PIXELS {
         let (x, y) = (tx * TS + p % TS, ty * TS + p / TS);
         let t_final = state[CH_T * TILE_PIXELS + p];
-        inputs.t_final[p] = t_final;
         if x >= width || y >= height {
             for c in inputs.v_chan.iter_mut() {
                 c[p] = 0.0;
@@ -67,8 +66,7 @@ fn gather_inputs(
             for c in inputs.v_labels[..labels].iter_mut() {
                 c[p] = 0.0;
             }
-            inputs.total_dot[p] = 0.0;
-            inputs.v_t_final[p] = 0.0;
+            inputs.behind[p] = 0.0;
             continue;
         }
         let pixel = y * width + x;
@@ -87,8 +85,7 @@ fn gather_inputs(
             inputs.v_labels[k][p] = v;
             dot += state[(CH_LABELS + k) * TILE_PIXELS + p] * v;
         }
-        inputs.total_dot[p] = dot;
-        inputs.v_t_final[p] = v_alpha - background.dot(v_rgb);
+        inputs.behind[p] = dot - t_final * (v_alpha - background.dot(v_rgb));
     }
 }
 
@@ -97,7 +94,7 @@ fn gather_inputs(
 /// intersection even with no label channels).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn backward_tile_impl<const HAS_LABELS: bool>(
+fn backward_tile_impl<F: MulAdd, const HAS_LABELS: bool>(
     tile: usize,
     out: &mut [f32],
     masks: &[u32],
@@ -119,8 +116,7 @@ fn backward_tile_impl<const HAS_LABELS: bool>(
     let mut prefix = [0.0f32; TILE_PIXELS];
     // Finished pixels keep their transmittance negated, as in the forward.
     let [start, end] = bins.tile_ranges[tile];
-    let (mut dx, mut vis, mut raw, mut alpha) =
-        ([0.0; LANES], [0.0; LANES], [0.0; LANES], [0.0; LANES]);
+    let (mut vis, mut raw, mut alpha) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
     let mut ok = [false; LANES];
     let mut w = [0.0f32; LANES];
     let mut cg = [0.0f32; LANES];
@@ -134,6 +130,7 @@ fn backward_tile_impl<const HAS_LABELS: bool>(
         let isect_out = &mut out[n * stride..(n + 1) * stride];
         let sp = splats[n];
         let label_values = &isect_labels[n * labels..(n + 1) * labels];
+        let lane_dx = lane_offsets(&sp, ox);
         let mut s_dx = [0.0f32; LANES];
         let mut s_dy = [0.0f32; LANES];
         let mut s_dxdx = [0.0f32; LANES];
@@ -148,20 +145,20 @@ fn backward_tile_impl<const HAS_LABELS: bool>(
         while todo != 0 {
             let s = todo.trailing_zeros() as usize;
             todo &= todo - 1;
-            let (y, half) = (s / 2, (s % 2) * LANES);
-            let dy = sp.my - (oy + y as f32 + 0.5);
+            let (y, half) = (s / 2, s % 2);
+            let dy = sp.my - (oy + CENTRES[y]);
+            let dy2 = dy * dy;
             {
-                let base = y * TS + half;
+                let base = y * TS + half * LANES;
+                let dx = &lane_dx[half];
                 let stored: &[f32; LANES] = seg_vis[vis_pos..vis_pos + LANES]
                     .try_into()
                     .expect("8 lanes");
                 vis_pos += LANES;
                 replay_falloff(
-                    &sp,
-                    ox + half as f32 + 0.5,
+                    sp.opacity,
                     stored,
                     alpha_max,
-                    &mut dx,
                     &mut vis,
                     &mut raw,
                     &mut alpha,
@@ -177,20 +174,17 @@ fn backward_tile_impl<const HAS_LABELS: bool>(
                     seg(&inputs.v_chan[3]),
                 );
                 for l in 0..LANES {
-                    cg[l] = sp.color.x * vr[l]
-                        + sp.color.y * vg[l]
-                        + sp.color.z * vb[l]
-                        + sp.depth * vd[l];
+                    let rg = F::mul_add(sp.color.y, vg[l], sp.color.x * vr[l]);
+                    let rgb = F::mul_add(sp.color.z, vb[l], rg);
+                    cg[l] = F::mul_add(sp.depth, vd[l], rgb);
                 }
                 for (k, &p) in label_values.iter().enumerate() {
                     let v = seg(&inputs.v_labels[k]);
                     for l in 0..LANES {
-                        cg[l] += p * v[l];
+                        cg[l] = F::mul_add(p, v[l], cg[l]);
                     }
                 }
-                let total = seg(&inputs.total_dot);
-                let v_tf = seg(&inputs.v_t_final);
-                let t_final = seg(&inputs.t_final);
+                let behind = seg(&inputs.behind);
                 let t_seg: &mut [f32; LANES] = (&mut t_buf[base..base + LANES])
                     .try_into()
                     .expect("8 lanes");
@@ -205,22 +199,26 @@ fn backward_tile_impl<const HAS_LABELS: bool>(
                     let contrib = valid & !stop;
                     let wl = if contrib { alpha[l] * t } else { 0.0 };
                     w[l] = wl;
-                    p_seg[l] += wl * cg[l];
-                    let suffix = total[l] - p_seg[l];
-                    let ra = 1.0 / (1.0 - alpha[l]);
-                    // dL/dalpha_i = T_i c_i·g - S_i·g / (1 - a_i) + T_final / (1 - a_i) · v_T,
+                    p_seg[l] = F::mul_add(wl, cg[l], p_seg[l]);
+                    // dL/dalpha_i = T_i c_i·g - (S_i·g - T_final v_T) / (1 - a_i),
                     // S_i = sum_{j > i} c_j alpha_j T_j (each T_j already holds 1 - a_i).
-                    let v_alpha = t * cg[l] - suffix * ra + t_final[l] * ra * v_tf[l];
+                    let ra = 1.0 / (1.0 - alpha[l]);
+                    let v_alpha = F::mul_add(t, cg[l], -((behind[l] - p_seg[l]) * ra));
                     // Clamped alpha has no gradient (gsplat: `opac * vis <= 0.999f`).
                     let m = contrib & (raw[l] <= alpha_max);
                     let v_sigma = if m { -raw[l] * v_alpha } else { 0.0 };
-                    s_op[l] += if m { vis[l] * v_alpha } else { 0.0 };
+                    s_op[l] = if m {
+                        F::mul_add(vis[l], v_alpha, s_op[l])
+                    } else {
+                        s_op[l]
+                    };
                     let d = dx[l];
-                    s_dx[l] += v_sigma * d;
-                    s_dy[l] += v_sigma * dy;
-                    s_dxdx[l] += v_sigma * d * d;
-                    s_dxdy[l] += v_sigma * d * dy;
-                    s_dydy[l] += v_sigma * dy * dy;
+                    let v_sigma_d = v_sigma * d;
+                    s_dx[l] += v_sigma_d;
+                    s_dy[l] = F::mul_add(v_sigma, dy, s_dy[l]);
+                    s_dxdx[l] = F::mul_add(v_sigma_d, d, s_dxdx[l]);
+                    s_dxdy[l] = F::mul_add(v_sigma_d, dy, s_dxdy[l]);
+                    s_dydy[l] = F::mul_add(v_sigma, dy2, s_dydy[l]);
                     t_seg[l] = if contrib {
                         next_t
                     } else if stop {
@@ -230,15 +228,15 @@ fn backward_tile_impl<const HAS_LABELS: bool>(
                     };
                 }
                 for l in 0..LANES {
-                    s_chan[0][l] += w[l] * vr[l];
-                    s_chan[1][l] += w[l] * vg[l];
-                    s_chan[2][l] += w[l] * vb[l];
-                    s_chan[3][l] += w[l] * vd[l];
+                    s_chan[0][l] = F::mul_add(w[l], vr[l], s_chan[0][l]);
+                    s_chan[1][l] = F::mul_add(w[l], vg[l], s_chan[1][l]);
+                    s_chan[2][l] = F::mul_add(w[l], vb[l], s_chan[2][l]);
+                    s_chan[3][l] = F::mul_add(w[l], vd[l], s_chan[3][l]);
                 }
                 for (acc, v_label) in s_lab.iter_mut().zip(&inputs.v_labels).take(labels) {
                     let v = seg(v_label);
                     for l in 0..LANES {
-                        acc[l] += w[l] * v[l];
+                        acc[l] = F::mul_add(w[l], v[l], acc[l]);
                     }
                 }
             }
@@ -265,7 +263,7 @@ fn backward_tile_impl<const HAS_LABELS: bool>(
 /// [`backward_tile_impl`] with the label sums compiled in only when there are label channels.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn backward_tile_kernel(
+fn backward_tile_kernel<F: MulAdd>(
     tile: usize,
     out: &mut [f32],
     masks: &[u32],
@@ -280,7 +278,7 @@ fn backward_tile_kernel(
     // One argument list for both instantiations.
     macro_rules! run {
         ($has_labels:literal) => {
-            backward_tile_impl::<$has_labels>(
+            backward_tile_impl::<F, $has_labels>(
                 tile,
                 out,
                 masks,
@@ -299,7 +297,7 @@ fn backward_tile_kernel(
 
 simd_dispatch!(
     /// [`backward_tile_kernel`] with AVX2 (or AVX-512VL) where the CPU has it.
-    backward_tile => backward_tile_kernel(
+    backward_tile => backward_tile_kernel::<MulAdd>(
         tile: usize,
         out: &mut [f32],
         masks: &[u32],
@@ -342,9 +340,7 @@ pub(crate) fn rasterize_backward(
         Box::new(TileInputs {
             v_chan: [[0.0; TILE_PIXELS]; 4],
             v_labels: [[0.0; TILE_PIXELS]; MAX_LABEL_CHANNELS],
-            total_dot: [0.0; TILE_PIXELS],
-            v_t_final: [0.0; TILE_PIXELS],
-            t_final: [0.0; TILE_PIXELS],
+            behind: [0.0; TILE_PIXELS],
         })
     };
     slices
