@@ -1,12 +1,12 @@
 //! Fast SSIM with its exact backward, as the training loss uses it: 3DGS's formulation (11×11
 //! Gaussian window, σ = 1.5, per channel, zero 'same' padding like `conv2d(padding=5)`).
 //! Separable, planar (one contiguous plane per map, so every pass is a straight vector loop),
-//! rayon over rows, AVX2 where the CPU has it, allocation-free once a `SsimWorkspace` has seen
-//! a size.
+//! rayon over rows, AVX2 or AVX-512 with fused multiply-adds where the CPU has them,
+//! allocation-free once a `SsimWorkspace` has seen a size.
 
 use rayon::prelude::*;
 
-use crate::simd::simd_dispatch;
+use crate::simd::{MulAdd, simd_dispatch};
 
 /// Window side and radius (3DGS `window_size = 11`).
 pub const SSIM_WINDOW: usize = 11;
@@ -96,7 +96,11 @@ impl SsimWorkspace {
 /// `N` outputs of the horizontal pass from `src[..N + 2·RADIUS]`, taps added in order. `N`
 /// independent accumulators: one would leave the adds waiting on each other's latency.
 #[inline(always)]
-fn hblur_block<const N: usize>(kernel: &[f32; SSIM_WINDOW], src: &[f32], out: &mut [f32]) {
+fn hblur_block<F: MulAdd, const N: usize>(
+    kernel: &[f32; SSIM_WINDOW],
+    src: &[f32],
+    out: &mut [f32],
+) {
     let mut acc = [0.0f32; N];
     let first: &[f32; N] = src[..N].try_into().expect("block");
     for l in 0..N {
@@ -105,7 +109,7 @@ fn hblur_block<const N: usize>(kernel: &[f32; SSIM_WINDOW], src: &[f32], out: &m
     for (k, &g) in kernel.iter().enumerate().skip(1) {
         let s: &[f32; N] = src[k..k + N].try_into().expect("block");
         for l in 0..N {
-            acc[l] += g * s[l];
+            acc[l] = F::mul_add(g, s[l], acc[l]);
         }
     }
     out[..N].copy_from_slice(&acc);
@@ -113,26 +117,26 @@ fn hblur_block<const N: usize>(kernel: &[f32; SSIM_WINDOW], src: &[f32], out: &m
 
 /// Horizontal pass over padded rows: `out[i] = Σ_k g[k]·row[i + k]`.
 #[inline(always)]
-fn hblur_rows_impl(kernel: &[f32; SSIM_WINDOW], padded: &[f32], out: &mut [f32], width: usize) {
+fn hblur_rows_impl<F: MulAdd>(kernel: &[f32; SSIM_WINDOW], padded: &[f32], out: &mut [f32], width: usize) {
     let pw = width + 2 * RADIUS;
     for (row, src) in out.chunks_exact_mut(width).zip(padded.chunks_exact(pw)) {
         let mut x = 0;
         while x + 4 * LANES <= width {
-            hblur_block::<{ 4 * LANES }>(kernel, &src[x..], &mut row[x..]);
+            hblur_block::<F, { 4 * LANES }>(kernel, &src[x..], &mut row[x..]);
             x += 4 * LANES;
         }
         while x + LANES <= width {
-            hblur_block::<LANES>(kernel, &src[x..], &mut row[x..]);
+            hblur_block::<F, LANES>(kernel, &src[x..], &mut row[x..]);
             x += LANES;
         }
         while x < width {
-            hblur_block::<1>(kernel, &src[x..], &mut row[x..]);
+            hblur_block::<F, 1>(kernel, &src[x..], &mut row[x..]);
             x += 1;
         }
     }
 }
 
-simd_dispatch!(hblur_rows => hblur_rows_impl(
+simd_dispatch!(hblur_rows => hblur_rows_impl::<MulAdd>(
     kernel: &[f32; SSIM_WINDOW],
     padded: &[f32],
     out: &mut [f32],
@@ -143,7 +147,7 @@ simd_dispatch!(hblur_rows => hblur_rows_impl(
 /// `y + k - RADIUS` lies inside the plane) added in order from 0.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn vblur_block<const N: usize>(
+fn vblur_block<F: MulAdd, const N: usize>(
     kernel: &[f32; SSIM_WINDOW],
     plane: &[f32],
     width: usize,
@@ -158,7 +162,7 @@ fn vblur_block<const N: usize>(
         let at = (y + k - RADIUS) * width + x;
         let s: &[f32; N] = plane[at..at + N].try_into().expect("block");
         for l in 0..N {
-            acc[l] += g * s[l];
+            acc[l] = F::mul_add(g, s[l], acc[l]);
         }
     }
     out[x..x + N].copy_from_slice(&acc);
@@ -167,7 +171,7 @@ fn vblur_block<const N: usize>(
 /// Vertical pass: output rows `first..` of the stacked planes (`height` rows of `width` each)
 /// from `src`, zero outside each plane.
 #[inline(always)]
-fn vblur_rows_impl(
+fn vblur_rows_impl<F: MulAdd>(
     kernel: &[f32; SSIM_WINDOW],
     src: &[f32],
     out: &mut [f32],
@@ -183,21 +187,21 @@ fn vblur_rows_impl(
         let k_hi = SSIM_WINDOW.min(height + RADIUS - y);
         let mut x = 0;
         while x + 4 * LANES <= width {
-            vblur_block::<{ 4 * LANES }>(kernel, plane, width, y, k_lo, k_hi, x, row);
+            vblur_block::<F, { 4 * LANES }>(kernel, plane, width, y, k_lo, k_hi, x, row);
             x += 4 * LANES;
         }
         while x + LANES <= width {
-            vblur_block::<LANES>(kernel, plane, width, y, k_lo, k_hi, x, row);
+            vblur_block::<F, LANES>(kernel, plane, width, y, k_lo, k_hi, x, row);
             x += LANES;
         }
         while x < width {
-            vblur_block::<1>(kernel, plane, width, y, k_lo, k_hi, x, row);
+            vblur_block::<F, 1>(kernel, plane, width, y, k_lo, k_hi, x, row);
             x += 1;
         }
     }
 }
 
-simd_dispatch!(vblur_rows => vblur_rows_impl(
+simd_dispatch!(vblur_rows => vblur_rows_impl::<MulAdd>(
     kernel: &[f32; SSIM_WINDOW],
     src: &[f32],
     out: &mut [f32],
