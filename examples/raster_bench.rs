@@ -58,20 +58,28 @@ fn scene(n: usize) -> Splats {
 }
 
 fn main() {
-    let sizes: Vec<usize> = std::env::args()
-        .skip(1)
-        .filter_map(|a| a.parse().ok())
-        .collect();
-    let sizes = if sizes.is_empty() {
-        vec![20_000, 50_000, 100_000]
-    } else {
-        sizes
-    };
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    // A trained model (e.g. `train fox_bench_ds8 --out fox1` then `fox1/model.ply`) is timed as
+    // it is; numbers are sizes of the synthetic ball.
+    let mut scenes: Vec<Splats> = Vec::new();
+    for a in &args {
+        if a.ends_with(".ply") {
+            match damage_twin::scene::ply::read_splats(std::path::Path::new(a)) {
+                Ok(s) => scenes.push(s),
+                Err(e) => eprintln!("{e}"),
+            }
+        } else if let Ok(n) = a.parse() {
+            scenes.push(scene(n));
+        }
+    }
+    if scenes.is_empty() {
+        scenes = [20_000, 50_000, 100_000].map(scene).into();
+    }
     let cam = camera();
     let settings = RenderSettings::default();
     println!("threads: {}", rayon::current_num_threads());
-    for n in sizes {
-        let splats = scene(n);
+    for splats in scenes {
+        let n = splats.len();
         let mut raster = Rasterizer::new();
         let mut out = RenderOutput::default();
         let mut grads = SplatGrads::zeros(&splats);
