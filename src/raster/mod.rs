@@ -6,6 +6,8 @@
 mod bin;
 mod fast_exp;
 mod forward;
+mod lane_math;
+mod lanes;
 mod project;
 mod project_backward;
 mod raster_backward;
