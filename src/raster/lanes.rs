@@ -91,6 +91,12 @@ impl F8 {
         self.zip(o, f32::min)
     }
 
+    /// `self.max(lo).min(hi)` per lane, as gsplat clamps the Jacobian's x / z and y / z.
+    #[inline(always)]
+    pub fn clamp(self, lo: f32, hi: f32) -> F8 {
+        self.max(F8::splat(lo)).min(F8::splat(hi))
+    }
+
     #[inline(always)]
     pub fn gt(self, o: F8) -> M8 {
         self.cmp(o, |a, b| a > b)

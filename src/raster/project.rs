@@ -135,15 +135,19 @@ pub(crate) fn camera_space(x: &GaussianLanes, frame: &CameraFrame) -> CameraSpac
     let inv_norm = 1.0 / norm;
     let q = [qx * inv_norm, qy * inv_norm, qz * inv_norm, qw * inv_norm];
     let rot = rotation_matrix(&q);
-    let scale = build3(|i| x.log_scale[i].exp());
+    // Written out: a closure this large is not always inlined into the AVX-compiled caller.
+    let scale = [
+        x.log_scale[0].exp(),
+        x.log_scale[1].exp(),
+        x.log_scale[2].exp(),
+    ];
     let m: M3 = build3x3(|r, c| rot[r][c] * scale[c]);
     let ws: M3 = build3x3(|r, c| w[r][0] * m[0][c] + w[r][1] * m[1][c] + w[r][2] * m[2][c]);
     let cov: M3 = build3x3(|r, c| dot3(&ws[r], &ws[c]));
     let rz = 1.0 / p[2];
     let rz2 = rz * rz;
-    let clamp = |v: F8, lo: f32, hi: f32| v.max(F8::splat(lo)).min(F8::splat(hi));
-    let tx = p[2] * clamp(p[0] * rz, -frame.lim_x_neg, frame.lim_x_pos);
-    let ty = p[2] * clamp(p[1] * rz, -frame.lim_y_neg, frame.lim_y_pos);
+    let tx = p[2] * (p[0] * rz).clamp(-frame.lim_x_neg, frame.lim_x_pos);
+    let ty = p[2] * (p[1] * rz).clamp(-frame.lim_y_neg, frame.lim_y_pos);
     let zero = F8::splat(0.0);
     let j0 = [frame.fx * rz, zero, -frame.fx * tx * rz2];
     let j1 = [zero, frame.fy * rz, -frame.fy * ty * rz2];

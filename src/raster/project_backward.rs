@@ -51,6 +51,12 @@ struct GeometryGrads {
     dist: F8,
 }
 
+/// Entry `[r][c]` of dL/dΣ_cam = j0 j0ᵀ g00 + (j0 j1ᵀ + j1 j0ᵀ) g01 + j1 j1ᵀ g11.
+#[inline(always)]
+fn cov_cam_grad_entry(j0: &[F8; 3], j1: &[F8; 3], g: [F8; 3], r: usize, c: usize) -> F8 {
+    j0[r] * j0[c] * g[0] + (j0[r] * j1[c] + j1[r] * j0[c]) * g[1] + j1[r] * j1[c] * g[2]
+}
+
 /// Projected values and screen-space gradients of eight Gaussians.
 #[derive(Clone, Copy, Debug, Default)]
 struct ScreenLanes {
@@ -110,9 +116,13 @@ fn backward_geometry(x: &GaussianLanes, sc: &ScreenLanes, frame: &CameraFrame) -
     let (j0, j1, t0, t1) = (cs.j0, cs.j1, cs.t0, cs.t1);
     let v_j0: [F8; 3] = build3(|i| 2.0 * (g00 * t0[i] + g01 * t1[i]));
     let v_j1: [F8; 3] = build3(|i| 2.0 * (g01 * t0[i] + g11 * t1[i]));
-    let v_cov_cam: M3 = build3x3(|r, c| {
-        j0[r] * j0[c] * g00 + (j0[r] * j1[c] + j1[r] * j0[c]) * g01 + j1[r] * j1[c] * g11
-    });
+    // Written out with a plain function: as a closure this entry was too large to be inlined.
+    let e = |r, c| cov_cam_grad_entry(&j0, &j1, [g00, g01, g11], r, c);
+    let v_cov_cam: M3 = [
+        [e(0, 0), e(0, 1), e(0, 2)],
+        [e(1, 0), e(1, 1), e(1, 2)],
+        [e(2, 0), e(2, 1), e(2, 2)],
+    ];
     // Σ_cam = ws wsᵀ, ws = W R S.
     let ws = cs.ws;
     let v_ws: M3 = build3x3(|r, c| {
@@ -142,10 +152,9 @@ fn backward_geometry(x: &GaussianLanes, sc: &ScreenLanes, frame: &CameraFrame) -
         fy * rz * v_m2[1],
         -(fx * p[0] * v_m2[0] + fy * p[1] * v_m2[1]) * rz2,
     ];
-    let clamp = |v: F8, lo: f32, hi: f32| v.max(F8::splat(lo)).min(F8::splat(hi));
     let (ux, uy) = (p[0] * rz, p[1] * rz);
-    let tx = p[2] * clamp(ux, -frame.lim_x_neg, frame.lim_x_pos);
-    let ty = p[2] * clamp(uy, -frame.lim_y_neg, frame.lim_y_pos);
+    let tx = p[2] * ux.clamp(-frame.lim_x_neg, frame.lim_x_pos);
+    let ty = p[2] * uy.clamp(-frame.lim_y_neg, frame.lim_y_pos);
     let in_x = ux.le(F8::splat(frame.lim_x_pos)) & ux.ge(F8::splat(-frame.lim_x_neg));
     let in_y = uy.le(F8::splat(frame.lim_y_pos)) & uy.ge(F8::splat(-frame.lim_y_neg));
     let x_inside = v_p[0] + -fx * rz2 * v_j0[2];
