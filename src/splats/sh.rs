@@ -29,7 +29,7 @@ pub const SH_C3: [f32; 7] = [
 
 /// Basis values `Y_k(dir)` for `k < (degree + 1)^2`; `dir` must be unit length. Entries past
 /// the degree are left untouched.
-#[inline]
+#[inline(always)]
 pub fn sh_basis(degree: u32, dir: Vec3, out: &mut [f32; 16]) {
     out[0] = SH_C0;
     if degree == 0 {
@@ -63,7 +63,7 @@ pub fn sh_basis(degree: u32, dir: Vec3, out: &mut [f32; 16]) {
 
 /// Partial derivatives `dY_k / d(x, y, z)`, treating the components as independent (the caller
 /// chains through the normalisation).
-#[inline]
+#[inline(always)]
 fn sh_basis_derivatives(degree: u32, dir: Vec3, out: &mut [Vec3; 16]) {
     out[0] = Vec3::ZERO;
     if degree == 0 {
@@ -96,7 +96,7 @@ fn sh_basis_derivatives(degree: u32, dir: Vec3, out: &mut [Vec3; 16]) {
 
 /// The raw SH sum `sum_k Y_k(dir) c_k` per RGB channel (colour = `max(sum + 0.5, 0)`).
 /// `coeffs` holds at least `(degree + 1)^2 * 3` values; `dir` must be unit length.
-#[inline]
+#[inline(always)]
 pub fn eval_sh(degree: u32, coeffs: &[f32], dir: Vec3) -> Vec3 {
     let mut basis = [0.0f32; 16];
     sh_basis(degree, dir, &mut basis);
@@ -104,14 +104,29 @@ pub fn eval_sh(degree: u32, coeffs: &[f32], dir: Vec3) -> Vec3 {
 }
 
 /// [`eval_sh`] from basis values `sh_basis` already wrote (the backward needs them twice).
-#[inline]
+// `inline(always)` here and below: the projection calls these from its AVX-compiled kernels,
+// and an out-of-line copy would be compiled for the baseline CPU.
+#[inline(always)]
 pub fn eval_sh_from_basis(degree: u32, basis: &[f32; 16], coeffs: &[f32]) -> Vec3 {
-    let n = super::model::sh_coeffs_for_degree(degree);
-    let mut sum = Vec3::ZERO;
-    for (k, b) in basis[..n].iter().enumerate() {
-        sum += *b * Vec3::new(coeffs[k * 3], coeffs[k * 3 + 1], coeffs[k * 3 + 2]);
+    // A constant count per degree, so that the four partial sums below unroll into registers.
+    match degree {
+        0 => sum_basis::<1>(basis, coeffs),
+        1 => sum_basis::<4>(basis, coeffs),
+        2 => sum_basis::<9>(basis, coeffs),
+        _ => sum_basis::<16>(basis, coeffs),
     }
-    sum
+}
+
+/// `sum_{k < N} basis[k] c_k` in four interleaved partial sums: one running sum per channel
+/// made a chain of N dependent adds, which set the projection's speed.
+#[inline(always)]
+fn sum_basis<const N: usize>(basis: &[f32; 16], coeffs: &[f32]) -> Vec3 {
+    let coeffs = &coeffs[..N * 3];
+    let mut part = [Vec3::ZERO; 4];
+    for (k, b) in basis[..N].iter().enumerate() {
+        part[k % 4] += *b * Vec3::new(coeffs[k * 3], coeffs[k * 3 + 1], coeffs[k * 3 + 2]);
+    }
+    (part[0] + part[1]) + (part[2] + part[3])
 }
 
 /// Backward of [`eval_sh`]: adds `Y_k * v_sum` into `v_coeffs` and returns the gradient with
@@ -130,7 +145,7 @@ pub fn eval_sh_backward(
 }
 
 /// [`eval_sh_backward`] from the basis values of `dir` (`sh_basis`).
-#[inline]
+#[inline(always)]
 pub fn eval_sh_backward_from_basis(
     degree: u32,
     basis: &[f32; 16],
@@ -139,23 +154,44 @@ pub fn eval_sh_backward_from_basis(
     v_sum: Vec3,
     v_coeffs: &mut [f32],
 ) -> Vec3 {
-    let n = super::model::sh_coeffs_for_degree(degree);
-    for (k, b) in basis[..n].iter().enumerate() {
+    // A constant count per degree, as in `eval_sh_from_basis`.
+    match degree {
+        0 => sh_backward::<1>(0, basis, coeffs, dir, v_sum, v_coeffs),
+        1 => sh_backward::<4>(1, basis, coeffs, dir, v_sum, v_coeffs),
+        2 => sh_backward::<9>(2, basis, coeffs, dir, v_sum, v_coeffs),
+        _ => sh_backward::<16>(3, basis, coeffs, dir, v_sum, v_coeffs),
+    }
+}
+
+/// [`eval_sh_backward_from_basis`] for `N = (degree + 1)^2` coefficients per channel.
+#[inline(always)]
+fn sh_backward<const N: usize>(
+    degree: u32,
+    basis: &[f32; 16],
+    coeffs: &[f32],
+    dir: Vec3,
+    v_sum: Vec3,
+    v_coeffs: &mut [f32],
+) -> Vec3 {
+    let coeffs = &coeffs[..N * 3];
+    let v_coeffs = &mut v_coeffs[..N * 3];
+    for (k, b) in basis[..N].iter().enumerate() {
         v_coeffs[k * 3] += b * v_sum.x;
         v_coeffs[k * 3 + 1] += b * v_sum.y;
         v_coeffs[k * 3 + 2] += b * v_sum.z;
     }
-    if degree == 0 {
+    if N == 1 {
         return Vec3::ZERO;
     }
     let mut d_basis = [Vec3::ZERO; 16];
     sh_basis_derivatives(degree, dir, &mut d_basis);
-    let mut v_dir = Vec3::ZERO;
-    for (k, d) in d_basis[..n].iter().enumerate().skip(1) {
+    // Two interleaved partial sums halve the chain of dependent adds.
+    let mut part = [Vec3::ZERO; 2];
+    for (k, d) in d_basis[..N].iter().enumerate().skip(1) {
         let c = Vec3::new(coeffs[k * 3], coeffs[k * 3 + 1], coeffs[k * 3 + 2]);
-        v_dir += *d * c.dot(v_sum);
+        part[k % 2] += *d * c.dot(v_sum);
     }
-    v_dir
+    part[0] + part[1]
 }
 
 #[cfg(test)]
