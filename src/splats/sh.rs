@@ -118,15 +118,26 @@ pub fn eval_sh_from_basis(degree: u32, basis: &[f32; 16], coeffs: &[f32]) -> Vec
 }
 
 /// `sum_{k < N} basis[k] c_k` in four interleaved partial sums: one running sum per channel
-/// made a chain of N dependent adds, which set the projection's speed.
+/// made a chain of N dependent adds, which set the projection's speed. (Locals, not an array
+/// indexed by `k % 4`: LLVM kept such an array on the stack, with a store per add.)
 #[inline(always)]
 fn sum_basis<const N: usize>(basis: &[f32; 16], coeffs: &[f32]) -> Vec3 {
     let coeffs = &coeffs[..N * 3];
-    let mut part = [Vec3::ZERO; 4];
-    for (k, b) in basis[..N].iter().enumerate() {
-        part[k % 4] += *b * Vec3::new(coeffs[k * 3], coeffs[k * 3 + 1], coeffs[k * 3 + 2]);
+    let term = |k: usize| basis[k] * Vec3::new(coeffs[k * 3], coeffs[k * 3 + 1], coeffs[k * 3 + 2]);
+    let [mut s0, mut s1, mut s2, mut s3] = [Vec3::ZERO; 4];
+    let mut k = 0;
+    while k + 4 <= N {
+        s0 += term(k);
+        s1 += term(k + 1);
+        s2 += term(k + 2);
+        s3 += term(k + 3);
+        k += 4;
     }
-    (part[0] + part[1]) + (part[2] + part[3])
+    while k < N {
+        s0 += term(k);
+        k += 1;
+    }
+    (s0 + s1) + (s2 + s3)
 }
 
 /// Backward of [`eval_sh`]: adds `Y_k * v_sum` into `v_coeffs` and returns the gradient with
@@ -185,13 +196,23 @@ fn sh_backward<const N: usize>(
     }
     let mut d_basis = [Vec3::ZERO; 16];
     sh_basis_derivatives(degree, dir, &mut d_basis);
-    // Two interleaved partial sums halve the chain of dependent adds.
-    let mut part = [Vec3::ZERO; 2];
-    for (k, d) in d_basis[..N].iter().enumerate().skip(1) {
+    // Two interleaved partial sums (locals, as in `sum_basis`) halve the chain of dependent
+    // adds.
+    let term = |k: usize| {
         let c = Vec3::new(coeffs[k * 3], coeffs[k * 3 + 1], coeffs[k * 3 + 2]);
-        part[k % 2] += *d * c.dot(v_sum);
+        d_basis[k] * c.dot(v_sum)
+    };
+    let (mut odd, mut even) = (Vec3::ZERO, Vec3::ZERO);
+    let mut k = 1;
+    while k + 2 <= N {
+        odd += term(k);
+        even += term(k + 1);
+        k += 2;
     }
-    part[0] + part[1]
+    if k < N {
+        odd += term(k);
+    }
+    odd + even
 }
 
 #[cfg(test)]
