@@ -156,13 +156,7 @@ fn backward_tile_impl<F: MulAdd, const HAS_LABELS: bool>(
                     .expect("8 lanes");
                 vis_pos += LANES;
                 replay_falloff(
-                    sp.opacity,
-                    stored,
-                    alpha_max,
-                    &mut vis,
-                    &mut raw,
-                    &mut alpha,
-                    &mut ok,
+                    sp.opacity, stored, alpha_max, &mut vis, &mut raw, &mut alpha, &mut ok,
                 );
                 let seg = |a: &[f32; TILE_PIXELS]| -> [f32; LANES] {
                     a[base..base + LANES].try_into().expect("8 lanes")

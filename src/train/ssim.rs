@@ -117,7 +117,12 @@ fn hblur_block<F: MulAdd, const N: usize>(
 
 /// Horizontal pass over padded rows: `out[i] = Σ_k g[k]·row[i + k]`.
 #[inline(always)]
-fn hblur_rows_impl<F: MulAdd>(kernel: &[f32; SSIM_WINDOW], padded: &[f32], out: &mut [f32], width: usize) {
+fn hblur_rows_impl<F: MulAdd>(
+    kernel: &[f32; SSIM_WINDOW],
+    padded: &[f32],
+    out: &mut [f32],
+    width: usize,
+) {
     let pw = width + 2 * RADIUS;
     for (row, src) in out.chunks_exact_mut(width).zip(padded.chunks_exact(pw)) {
         let mut x = 0;
