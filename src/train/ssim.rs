@@ -134,9 +134,17 @@ fn hblur_rows_impl<F: MulAdd>(
             hblur_block::<F, LANES>(kernel, &src[x..], &mut row[x..]);
             x += LANES;
         }
-        while x < width {
-            hblur_block::<F, 1>(kernel, &src[x..], &mut row[x..]);
-            x += 1;
+        if x < width && width >= LANES {
+            // The last columns as one vector block overlapping the previous one (each column's
+            // value does not depend on its block), instead of one column at a time: a single
+            // accumulator waits on 11 multiply-adds in a row.
+            let x = width - LANES;
+            hblur_block::<F, LANES>(kernel, &src[x..], &mut row[x..]);
+        } else {
+            while x < width {
+                hblur_block::<F, 1>(kernel, &src[x..], &mut row[x..]);
+                x += 1;
+            }
         }
     }
 }
@@ -199,9 +207,14 @@ fn vblur_rows_impl<F: MulAdd>(
             vblur_block::<F, LANES>(kernel, plane, width, y, k_lo, k_hi, x, row);
             x += LANES;
         }
-        while x < width {
-            vblur_block::<F, 1>(kernel, plane, width, y, k_lo, k_hi, x, row);
-            x += 1;
+        if x < width && width >= LANES {
+            // As in `hblur_rows_impl`: one overlapping vector block for the last columns.
+            vblur_block::<F, LANES>(kernel, plane, width, y, k_lo, k_hi, width - LANES, row);
+        } else {
+            while x < width {
+                vblur_block::<F, 1>(kernel, plane, width, y, k_lo, k_hi, x, row);
+                x += 1;
+            }
         }
     }
 }
