@@ -378,19 +378,21 @@ pub(crate) fn write_output(
     let bg = [background.x, background.y, background.z];
     for y in 0..h {
         let (ty, iy) = (y / TS, y % TS);
-        for x in 0..w {
-            let (tx, ix) = (x / TS, x % TS);
+        // One tile's slice per 16 pixels of the row, not one lookup per pixel.
+        for tx in 0..tiles_x {
             let st = &state[(ty * tiles_x + tx) * stride..][..stride];
-            let p = iy * TS + ix;
-            let pixel = y * w + x;
-            let t = st[CH_T * TILE_PIXELS + p];
-            for c in 0..3 {
-                out.color[pixel * 3 + c] = st[(CH_RGB + c) * TILE_PIXELS + p] + t * bg[c];
-            }
-            out.alpha[pixel] = 1.0 - t;
-            out.depth[pixel] = st[CH_DEPTH * TILE_PIXELS + p];
-            for k in 0..labels {
-                out.labels[pixel * labels + k] = st[(CH_LABELS + k) * TILE_PIXELS + p];
+            for ix in 0..TS.min(w - tx * TS) {
+                let p = iy * TS + ix;
+                let pixel = y * w + tx * TS + ix;
+                let t = st[CH_T * TILE_PIXELS + p];
+                for c in 0..3 {
+                    out.color[pixel * 3 + c] = st[(CH_RGB + c) * TILE_PIXELS + p] + t * bg[c];
+                }
+                out.alpha[pixel] = 1.0 - t;
+                out.depth[pixel] = st[CH_DEPTH * TILE_PIXELS + p];
+                for k in 0..labels {
+                    out.labels[pixel * labels + k] = st[(CH_LABELS + k) * TILE_PIXELS + p];
+                }
             }
         }
     }
