@@ -1,6 +1,7 @@
 //! Times the CPU rasterizer's forward and backward on a fox_bench_ds8-sized frame (134×239,
 //! camera of frame 0001) for 20k / 50k / 100k Gaussians in the ball of its `points.ply`.
-//! Run: `RAYON_NUM_THREADS=1 cargo run --release --example raster_bench [-- N...]`.
+//! A `.ply` argument times that model instead (e.g. a trained `fox1/model.ply`).
+//! Run: `RAYON_NUM_THREADS=1 cargo run --release --example raster_bench [-- N... | MODEL.ply...]`.
 
 use std::time::Instant;
 

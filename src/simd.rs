@@ -3,7 +3,9 @@
 /// How a kernel computes `a · b + c`: kernels generic over it are built with [`Fused`] (one
 /// rounding, one instruction) in the AVX builds and with [`Separate`] (two roundings) in the
 /// baseline one, where `f32::mul_add` would be a libm call per lane. Both directions of a
-/// computation that must agree bit for bit run in the same build.
+/// computation that must agree bit for bit run in the same build. Call it from
+/// `#[inline(always)]` functions, not from large closures: a closure LLVM keeps out of line is
+/// compiled for the baseline CPU, where each `mul_add` becomes that libm call (10× slower).
 pub(crate) trait MulAdd {
     fn mul_add(a: f32, b: f32, c: f32) -> f32;
 }
