@@ -125,9 +125,7 @@ impl F8 {
     /// `if mask { a } else { b }` per lane.
     #[inline(always)]
     pub fn select(mask: M8, a: F8, b: F8) -> F8 {
-        F8(std::array::from_fn(
-            |l| if mask.0[l] { a.0[l] } else { b.0[l] },
-        ))
+        F8::from_fn(|l| if mask.0[l] { a.0[l] } else { b.0[l] })
     }
 }
 
