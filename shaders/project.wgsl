@@ -76,16 +76,21 @@ fn sh_color(g: u32, dir: vec3<f32>) -> vec3<f32> {
 }
 
 // Tiles [x0, x1) × [y0, y1) as (x0, y0, x1, y1): gsplat's radius rectangle intersected with the
-// tiles holding a pixel centre inside `extent` (raster::tile_rect, the same f32 operations).
+// tiles holding a pixel centre of the image inside `extent` (raster::tile_rect, the same f32
+// operations).
 fn tile_rect(xy: vec2<f32>, r: f32, extent: vec2<f32>) -> vec4<u32> {
-    if !(extent.x > 0.0) || !(extent.y > 0.0) {
+    if !(extent.x > 0.0) || !(extent.y > 0.0) || u.img_size.x == 0u || u.img_size.y == 0u {
         return vec4<u32>(0u);
     }
     let tb = vec2<f32>(u.tile_bounds);
     let g0 = clamp(floor((xy - vec2<f32>(r)) / TILE_SIZE), vec2<f32>(0.0), tb);
     let g1 = clamp(ceil((xy + vec2<f32>(r)) / TILE_SIZE), vec2<f32>(0.0), tb);
-    let p0 = ceil(xy - extent - vec2<f32>(0.5));
-    let p1 = floor(xy + extent - vec2<f32>(0.5));
+    let p0 = max(ceil(xy - extent - vec2<f32>(0.5)), vec2<f32>(0.0));
+    let p1 = min(floor(xy + extent - vec2<f32>(0.5)), vec2<f32>(u.img_size - vec2<u32>(1u)));
+    // `!(<=)` also drops NaN.
+    if !(p0.x <= p1.x) || !(p0.y <= p1.y) {
+        return vec4<u32>(0u);
+    }
     let e0 = clamp(floor(p0 / TILE_SIZE), vec2<f32>(0.0), tb);
     let e1 = clamp(floor(p1 / TILE_SIZE) + vec2<f32>(1.0), vec2<f32>(0.0), tb);
     let lo = vec2<u32>(max(g0, e0));

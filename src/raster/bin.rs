@@ -5,6 +5,8 @@
 use glam::Vec2;
 
 use super::{Projected, TILE_SIZE};
+
+const TS: usize = TILE_SIZE as usize;
 use crate::simd::simd_dispatch;
 
 /// Tiles covering a `width × height` image: `(tiles_x, tiles_y)`; tile id = `ty * tiles_x + tx`.
@@ -12,15 +14,17 @@ pub fn tile_grid(width: u32, height: u32) -> (u32, u32) {
     (width.div_ceil(TILE_SIZE), height.div_ceil(TILE_SIZE))
 }
 
-/// Tiles `[x0, x1) × [y0, y1)` (as `[x0, y0, x1, y1]`) a projected Gaussian is binned into:
-/// gsplat's rectangle of `radius` around the mean, intersected with the tiles holding a pixel
-/// centre inside `extent` (the box where alpha can reach 1/255). Dropping the other tiles
-/// changes no pixel: every Gaussian there would be skipped by the alpha threshold.
+/// Tiles `[x0, x1) × [y0, y1)` (as `[x0, y0, x1, y1]`) a projected Gaussian is binned into in
+/// a `width × height` image: gsplat's rectangle of `radius` around the mean, intersected with
+/// the tiles holding a pixel centre of the image inside `extent` (the box where alpha can reach
+/// 1/255). Dropping the other tiles changes no pixel of the image: every Gaussian there would be
+/// skipped by the alpha threshold, or blend only into the edge tiles' pixels beyond the image.
 #[inline(always)]
-pub fn tile_rect(mean2d: Vec2, radius: u32, extent: Vec2, tiles_x: u32, tiles_y: u32) -> [u32; 4] {
-    if radius == 0 || !(extent.x > 0.0) || !(extent.y > 0.0) {
+pub fn tile_rect(mean2d: Vec2, radius: u32, extent: Vec2, width: u32, height: u32) -> [u32; 4] {
+    if radius == 0 || !(extent.x > 0.0) || !(extent.y > 0.0) || width == 0 || height == 0 {
         return [0, 0, 0, 0];
     }
+    let (tiles_x, tiles_y) = tile_grid(width, height);
     let ts = TILE_SIZE as f32;
     let r = radius as f32;
     let clamp = |v: f32, hi: u32| v.max(0.0).min(hi as f32) as u32;
@@ -29,11 +33,15 @@ pub fn tile_rect(mean2d: Vec2, radius: u32, extent: Vec2, tiles_x: u32, tiles_y:
     let gx1 = clamp(((mean2d.x + r) / ts).ceil(), tiles_x);
     let gy0 = clamp(((mean2d.y - r) / ts).floor(), tiles_y);
     let gy1 = clamp(((mean2d.y + r) / ts).ceil(), tiles_y);
-    // Pixel centres p + 0.5 with |p + 0.5 - mean| <= extent.
-    let px0 = (mean2d.x - extent.x - 0.5).ceil();
-    let px1 = (mean2d.x + extent.x - 0.5).floor();
-    let py0 = (mean2d.y - extent.y - 0.5).ceil();
-    let py1 = (mean2d.y + extent.y - 0.5).floor();
+    // Pixels p of the image whose centres p + 0.5 lie within extent of the mean.
+    let px0 = (mean2d.x - extent.x - 0.5).ceil().max(0.0);
+    let px1 = (mean2d.x + extent.x - 0.5).floor().min((width - 1) as f32);
+    let py0 = (mean2d.y - extent.y - 0.5).ceil().max(0.0);
+    let py1 = (mean2d.y + extent.y - 0.5).floor().min((height - 1) as f32);
+    // `!(<=)` also drops NaN.
+    if !(px0 <= px1) || !(py0 <= py1) {
+        return [0, 0, 0, 0];
+    }
     let ex0 = clamp((px0 / ts).floor(), tiles_x);
     let ex1 = clamp((px1 / ts).floor() + 1.0, tiles_x);
     let ey0 = clamp((py0 / ts).floor(), tiles_y);
@@ -92,6 +100,9 @@ simd_dispatch!(
 pub(crate) struct TileBins {
     pub tiles_x: u32,
     pub tiles_y: u32,
+    /// The image the tiles cover; the last tile column and row can reach past it.
+    pub width: u32,
+    pub height: u32,
     /// Gaussian index per intersection, ordered by (tile, depth).
     pub gaussian_ids: Vec<u32>,
     /// Per tile its `[start, end)` range in `gaussian_ids`.
@@ -108,6 +119,16 @@ pub(crate) struct TileBins {
 impl TileBins {
     pub fn tile_count(&self) -> usize {
         (self.tiles_x * self.tiles_y) as usize
+    }
+
+    /// Pixel columns and rows of `tile` inside the image, `(columns, rows)`, at most 16 each.
+    pub fn tile_extent(&self, tile: usize) -> (usize, usize) {
+        let tiles_x = self.tiles_x as usize;
+        let (ox, oy) = ((tile % tiles_x) * TS, (tile / tiles_x) * TS);
+        (
+            (self.width as usize).saturating_sub(ox).min(TS),
+            (self.height as usize).saturating_sub(oy).min(TS),
+        )
     }
 
     /// `per_isect` values per intersection of `data`, split into one slice per tile (a few
@@ -132,6 +153,8 @@ impl TileBins {
         let (tiles_x, tiles_y) = tile_grid(width, height);
         self.tiles_x = tiles_x;
         self.tiles_y = tiles_y;
+        self.width = width;
+        self.height = height;
         let n = projected.radii.len();
         let tiles = self.tile_count();
         self.rects.clear();
@@ -144,8 +167,8 @@ impl TileBins {
                 projected.means2d[g],
                 projected.radii[g],
                 projected.extents[g],
-                tiles_x,
-                tiles_y,
+                width,
+                height,
             );
             if rect[2] > rect[0] {
                 self.rects[g] = rect;
@@ -190,19 +213,34 @@ mod tests {
 
     #[test]
     fn tile_rect_follows_radius_and_clips_to_the_image() {
-        let r = tile_rect(Vec2::new(20.0, 20.0), 5, Vec2::splat(100.0), 4, 4);
+        let r = tile_rect(Vec2::new(20.0, 20.0), 5, Vec2::splat(100.0), 64, 64);
         assert_eq!(r, [0, 0, 2, 2]);
-        let r = tile_rect(Vec2::new(-3.0, 20.0), 5, Vec2::splat(100.0), 4, 4);
+        let r = tile_rect(Vec2::new(-3.0, 20.0), 5, Vec2::splat(100.0), 64, 64);
         assert_eq!(r, [0, 0, 1, 2]);
+    }
+
+    #[test]
+    fn tile_rect_drops_edge_tiles_whose_reached_pixels_lie_beyond_the_image() {
+        // A 40 × 40 image: the third tile column holds pixels 32..40 of the image, 40..48 past it.
+        let beyond = tile_rect(Vec2::new(44.0, 8.0), 6, Vec2::splat(3.0), 40, 40);
+        assert_eq!(beyond, [0, 0, 0, 0]);
+        let reaching = tile_rect(Vec2::new(42.0, 8.0), 6, Vec2::splat(3.0), 40, 40);
+        assert_eq!(reaching, [2, 0, 3, 1]);
+        // Below the last row.
+        let below = tile_rect(Vec2::new(8.0, 44.0), 6, Vec2::splat(3.0), 40, 40);
+        assert_eq!(below, [0, 0, 0, 0]);
+        // An extent too small to hold any pixel centre.
+        let between = tile_rect(Vec2::new(8.0, 8.0), 1, Vec2::splat(0.2), 40, 40);
+        assert_eq!(between, [0, 0, 0, 0]);
     }
 
     #[test]
     fn tile_rect_drops_tiles_no_pixel_centre_of_the_extent_reaches() {
         // Radius rectangle spans tiles 0..2 in x, but the 1/255 box ends at x = 15.4.
-        let r = tile_rect(Vec2::new(12.0, 8.0), 10, Vec2::new(3.4, 3.0), 4, 4);
+        let r = tile_rect(Vec2::new(12.0, 8.0), 10, Vec2::new(3.4, 3.0), 64, 64);
         assert_eq!(r, [0, 0, 1, 1]);
         // Extent reaching the centre 16.5 of the first pixel of tile 1.
-        let r = tile_rect(Vec2::new(12.0, 8.0), 10, Vec2::new(4.6, 3.0), 4, 4);
+        let r = tile_rect(Vec2::new(12.0, 8.0), 10, Vec2::new(4.6, 3.0), 64, 64);
         assert_eq!(r, [0, 0, 2, 1]);
     }
 

@@ -191,7 +191,7 @@ fn rasterize_tile_impl<F: MulAdd>(
     let (ox, oy) = ((tx * TS) as f32, (ty * TS) as f32);
     state.fill(0.0);
     let (t_buf, rest) = state.split_at_mut(TILE_PIXELS);
-    t_buf.fill(1.0);
+    start_transmittance(t_buf, bins.tile_extent(tile));
     let (rgb, rest) = rest.split_at_mut(3 * TILE_PIXELS);
     let (depth_buf, label_buf) = rest.split_at_mut(TILE_PIXELS);
     let (r_buf, gb) = rgb.split_at_mut(TILE_PIXELS);
@@ -205,14 +205,18 @@ fn rasterize_tile_impl<F: MulAdd>(
     let mut w = [0.0f32; LANES];
     let mut vis_pos = 0;
     let ids = &bins.gaussian_ids[start as usize..end as usize];
+    // Bit `2y + h` set while row segment (y, h) has a pixel still blending: a segment whose
+    // pixels all finished is skipped before its falloff is computed, and the tile stops when
+    // none is left.
+    let mut live = live_segments(t_buf);
     let mut n = 0;
     while n < ids.len() {
-        if n % 32 == 31 && !any_live(t_buf) {
+        if live == 0 {
             break;
         }
         let sp = splats[n];
         let label_values = &isect_labels[n * labels..(n + 1) * labels];
-        let todo = masks[n];
+        let todo = masks[n] & live;
         let terms = RowTerms::new(&sp, ox);
         // Two passes over the segments: first every falloff (independent of the tile state, so
         // the out-of-order core overlaps their exp chains), then the blends.
@@ -245,6 +249,7 @@ fn rasterize_tile_impl<F: MulAdd>(
             let alpha = &seg_alpha[k];
             let stored_k = &seg_stored[k];
             let mut any_valid = false;
+            let mut any_stop = false;
             for l in 0..LANES {
                 let t = t_seg[l];
                 let valid = (t > 0.0) & (stored_k[l] >= 0.0);
@@ -252,6 +257,7 @@ fn rasterize_tile_impl<F: MulAdd>(
                 let next_t = t * (1.0 - alpha[l]);
                 // gsplat: `if (next_T <= 1e-4) { done = true; break; }` (exclusive).
                 let stop = valid & (next_t <= TRANSMITTANCE_MIN);
+                any_stop |= stop;
                 let contrib = valid & !stop;
                 w[l] = if contrib { alpha[l] * t } else { 0.0 };
                 t_seg[l] = if contrib {
@@ -264,6 +270,9 @@ fn rasterize_tile_impl<F: MulAdd>(
             }
             if !any_valid {
                 continue;
+            }
+            if any_stop && !any_live(t_seg) {
+                live &= !(1 << s);
             }
             used |= 1 << s;
             let stored: &mut [f32; LANES] = (&mut seg_vis[vis_pos..vis_pos + LANES])
@@ -292,6 +301,27 @@ fn rasterize_tile_impl<F: MulAdd>(
     for t in t_buf.iter_mut() {
         *t = t.abs();
     }
+}
+
+/// Fills a tile's transmittance for the blend: 1 for its pixels in the image (`columns × rows`
+/// of them, [`TileBins::tile_extent`]), finished (negated) for those past the image's right or
+/// bottom edge, so they neither blend nor keep the tile alive. Forward and backward start alike.
+#[inline(always)]
+pub(crate) fn start_transmittance(t: &mut [f32], (columns, rows): (usize, usize)) {
+    for (y, row) in t.chunks_exact_mut(TS).enumerate() {
+        for (x, t) in row.iter_mut().enumerate() {
+            *t = if x < columns && y < rows { 1.0 } else { -1.0 };
+        }
+    }
+}
+
+/// The row segments of a tile's transmittance (finished pixels negated) with a pixel still
+/// blending, as bit `2y + h` for pixels `8h..8h + 8` of row `y`.
+#[inline(always)]
+pub(crate) fn live_segments(t: &[f32]) -> u32 {
+    t.chunks_exact(LANES)
+        .enumerate()
+        .fold(0, |bits, (s, seg)| bits | ((any_live(seg) as u32) << s))
 }
 
 /// Whether any pixel of a transmittance slice (finished pixels negated) is still blending.

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use super::bin::TileBins;
 use super::forward::{
     CENTRES, CH_DEPTH, CH_LABELS, CH_RGB, CH_T, LANES, Splat2d, lane_offsets, replay_falloff,
-    state_channels,
+    start_transmittance, state_channels,
 };
 use super::segments::SegmentStore;
 use super::{
@@ -112,6 +112,7 @@ fn backward_tile_impl<F: MulAdd, const HAS_LABELS: bool>(
     let ty = tile / bins.tiles_x as usize;
     let (ox, oy) = ((tx * TS) as f32, (ty * TS) as f32);
     let mut t_buf = [1.0f32; TILE_PIXELS];
+    start_transmittance(&mut t_buf, bins.tile_extent(tile));
     // Running `sum_{j <= i} w_j (c_j · g)` per pixel: the suffix `S_i · g` is total - prefix.
     let mut prefix = [0.0f32; TILE_PIXELS];
     // Finished pixels keep their transmittance negated, as in the forward.

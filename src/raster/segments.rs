@@ -150,13 +150,20 @@ fn tile_masks_impl(
         ((tile % tiles_x) * TS) as f32,
         ((tile / tiles_x) * TS) as f32,
     );
+    let inside = bins.tile_extent(tile);
     let [start, end] = bins.tile_ranges[tile];
     let ids = &bins.gaussian_ids[start as usize..end as usize];
     let mut segments = 0;
     for ((mask, splat), &g) in masks.iter_mut().zip(splats.iter_mut()).zip(ids) {
         let g = g as usize;
         let sp = Splat2d::load(projected, g);
-        *mask = segment_mask(&sp, power_max[g], footprint(projected, g, ox, oy), ox, oy);
+        *mask = segment_mask(
+            &sp,
+            power_max[g],
+            footprint(projected, g, ox, oy, inside),
+            ox,
+            oy,
+        );
         *splat = sp;
         segments += mask.count_ones() as usize;
     }
@@ -177,20 +184,27 @@ simd_dispatch!(
     ) -> usize
 );
 
-/// The pixel rows `[y0, y1)` and columns `[x0, x1)` of a tile whose centres lie in a Gaussian's
-/// extent box (`origin` is the tile's top-left pixel).
+/// The pixel columns `[x0, x1)` and rows `[y0, y1)` of a tile whose centres lie in a Gaussian's
+/// extent box and in the image (`ox, oy` is the tile's top-left pixel, `inside` its columns and
+/// rows within the image, [`TileBins::tile_extent`]). The edge tiles' pixels past the image are
+/// never blended: the forward starts them finished.
 #[inline(always)]
-pub(crate) fn footprint(p: &Projected, g: usize, ox: f32, oy: f32) -> [usize; 4] {
+pub(crate) fn footprint(
+    p: &Projected,
+    g: usize,
+    ox: f32,
+    oy: f32,
+    (columns, rows): (usize, usize),
+) -> [usize; 4] {
     let m = p.means2d[g];
     let e = p.extents[g];
-    let ts = TS as f32;
-    let lo = |v: f32| v.ceil().max(0.0).min(ts) as usize;
-    let hi = |v: f32| (v.floor() + 1.0).max(0.0).min(ts) as usize;
+    let lo = |v: f32, n: usize| v.ceil().max(0.0).min(n as f32) as usize;
+    let hi = |v: f32, n: usize| (v.floor() + 1.0).max(0.0).min(n as f32) as usize;
     [
-        lo(m.x - e.x - 0.5 - ox),
-        lo(m.y - e.y - 0.5 - oy),
-        hi(m.x + e.x - 0.5 - ox),
-        hi(m.y + e.y - 0.5 - oy),
+        lo(m.x - e.x - 0.5 - ox, columns),
+        lo(m.y - e.y - 0.5 - oy, rows),
+        hi(m.x + e.x - 0.5 - ox, columns),
+        hi(m.y + e.y - 0.5 - oy, rows),
     ]
 }
 
