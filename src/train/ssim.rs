@@ -1,8 +1,12 @@
 //! Fast SSIM with its exact backward, as the training loss uses it: 3DGS's formulation (11×11
 //! Gaussian window, σ = 1.5, per channel, zero 'same' padding like `conv2d(padding=5)`).
-//! Separable, planar (one contiguous plane per map, so every pass is a straight vector loop),
-//! rayon over rows, AVX2 or AVX-512 with fused multiply-adds where the CPU has them,
-//! allocation-free once a `SsimWorkspace` has seen a size.
+//! Separable and streamed: per channel, each image row's products are blurred horizontally into
+//! a ring of the last 11 rows, each SSIM row is blurred vertically from that ring as soon as its
+//! window is complete, and its partials go through a second ring the same way, so every pass
+//! works on rows that are still in the L1 cache. Rayon over horizontal bands (each recomputes
+//! the 10 rows its windows reach beyond it; every value is computed the same way in any band,
+//! so results are identical for any thread count), AVX2 or AVX-512 with fused multiply-adds
+//! where the CPU has them, allocation-free once a `SsimWorkspace` has seen a size.
 
 use rayon::prelude::*;
 
@@ -21,8 +25,9 @@ pub const SSIM_C2: f32 = 0.03 * 0.03;
 const FWD: usize = 5;
 /// Backward maps: dS/dmu_x, dS/dE[x²], dS/dE[xy] (before and after blurring).
 const BWD: usize = 3;
-/// Rows per rayon task: enough work per task that scheduling costs stay negligible.
-const ROWS_PER_TASK: usize = 4;
+/// Fewest image rows per band: below this the recomputed margins (10 rows on each side) would
+/// cost more than the parallelism gains.
+const MIN_BAND_ROWS: usize = 32;
 /// Output columns a blur keeps in registers (one AVX vector of f32).
 const LANES: usize = 8;
 
@@ -42,28 +47,56 @@ pub fn gaussian_window() -> [f32; SSIM_WINDOW] {
     g
 }
 
-/// Scratch buffers for `ssim_with_grad`, sized on first use and reused while the size holds.
-/// Each map is a plane of "plane rows" `r = channel * height + y`; map `j`'s row `r` is row
-/// `j * 3 * height + r` of its buffer.
+/// One band task's scratch, for images `width` wide: the current padded row of each map, the
+/// rings of horizontally blurred rows (row `r` in slot `r % SSIM_WINDOW`), and one row of each
+/// later stage.
+#[derive(Clone, Default)]
+struct BandScratch {
+    /// `FWD` rows of `width + 2·RADIUS`, zero pads never written.
+    fwd_padded: Vec<f32>,
+    /// `FWD` rings of `SSIM_WINDOW` rows.
+    fwd_ring: Vec<f32>,
+    /// Blurred statistics of one row: mu_x, mu_y, E[x²], E[y²], E[xy].
+    stats: Vec<f32>,
+    /// Weighted SSIM of one row.
+    ssim_row: Vec<f32>,
+    /// `BWD` weighted partials of one row, padded like `fwd_padded`.
+    bwd_padded: Vec<f32>,
+    /// `BWD` rings of their horizontal blurs.
+    bwd_ring: Vec<f32>,
+    /// Blurred (adjoint-convolved) partials of one row.
+    bwd_rows: Vec<f32>,
+    /// Weighted SSIM sum per channel and row of the band (`3 × band rows`).
+    sums: Vec<f64>,
+}
+
+impl BandScratch {
+    fn new(width: usize, band_rows: usize) -> BandScratch {
+        let pw = width + 2 * RADIUS;
+        BandScratch {
+            fwd_padded: vec![0.0; FWD * pw],
+            fwd_ring: vec![0.0; FWD * SSIM_WINDOW * width],
+            stats: vec![0.0; FWD * width],
+            ssim_row: vec![0.0; width],
+            bwd_padded: vec![0.0; BWD * pw],
+            bwd_ring: vec![0.0; BWD * SSIM_WINDOW * width],
+            bwd_rows: vec![0.0; BWD * width],
+            sums: vec![0.0; 3 * band_rows],
+        }
+    }
+}
+
+/// Scratch for `ssim_with_grad`, sized on first use and reused while the size and band count
+/// hold.
 #[derive(Default)]
 pub struct SsimWorkspace {
     width: usize,
     height: usize,
+    band_rows: usize,
     kernel: [f32; SSIM_WINDOW],
-    /// `FWD` maps, each row zero-padded by `RADIUS` pixels on both sides.
-    fwd_padded: Vec<f32>,
-    /// Horizontal blur of `fwd_padded`, unpadded.
-    fwd_h: Vec<f32>,
-    /// Blurred statistics: mu_x, mu_y, E[x²], E[y²], E[xy].
-    stats: Vec<f32>,
-    /// `BWD` weighted partial derivatives, padded like `fwd_padded`.
-    bwd_padded: Vec<f32>,
-    bwd_h: Vec<f32>,
-    /// Blurred (adjoint-convolved) partials.
-    bwd: Vec<f32>,
-    /// Weighted SSIM per pixel, one row per plane row.
-    ssim_map: Vec<f32>,
-    /// Weighted SSIM sum per plane row, summed in order for a thread-independent result.
+    bands: Vec<BandScratch>,
+    /// Weighted SSIM sum per plane row `c · height + y`, summed in order for a
+    /// thread-independent result.
     row_sums: Vec<f64>,
 }
 
@@ -72,24 +105,22 @@ impl SsimWorkspace {
         SsimWorkspace::default()
     }
 
-    fn ensure(&mut self, width: usize, height: usize) {
-        if self.width == width && self.height == height && !self.fwd_h.is_empty() {
+    fn ensure(&mut self, width: usize, height: usize, band_rows: usize) {
+        let bands = height.div_ceil(band_rows);
+        if self.width == width
+            && self.height == height
+            && self.band_rows == band_rows
+            && self.bands.len() == bands
+        {
             return;
         }
         self.width = width;
         self.height = height;
+        self.band_rows = band_rows;
         self.kernel = gaussian_window();
-        let rows = 3 * height;
-        let pw = width + 2 * RADIUS;
         // Fresh zeroed buffers: the padding columns are never written afterwards.
-        self.fwd_padded = vec![0.0; FWD * rows * pw];
-        self.fwd_h = vec![0.0; FWD * rows * width];
-        self.stats = vec![0.0; FWD * rows * width];
-        self.bwd_padded = vec![0.0; BWD * rows * pw];
-        self.bwd_h = vec![0.0; BWD * rows * width];
-        self.bwd = vec![0.0; BWD * rows * width];
-        self.ssim_map = vec![0.0; rows * width];
-        self.row_sums = vec![0.0; rows];
+        self.bands = vec![BandScratch::new(width, band_rows); bands];
+        self.row_sums = vec![0.0; 3 * height];
     }
 }
 
@@ -115,156 +146,117 @@ fn hblur_block<F: MulAdd, const N: usize>(
     out[..N].copy_from_slice(&acc);
 }
 
-/// Horizontal pass over padded rows: `out[i] = Σ_k g[k]·row[i + k]`.
+/// Horizontal pass of one padded row: `out[i] = Σ_k g[k]·src[i + k]`.
 #[inline(always)]
-fn hblur_rows_impl<F: MulAdd>(
-    kernel: &[f32; SSIM_WINDOW],
-    padded: &[f32],
-    out: &mut [f32],
-    width: usize,
-) {
-    let pw = width + 2 * RADIUS;
-    for (row, src) in out.chunks_exact_mut(width).zip(padded.chunks_exact(pw)) {
-        let mut x = 0;
-        while x + 4 * LANES <= width {
-            hblur_block::<F, { 4 * LANES }>(kernel, &src[x..], &mut row[x..]);
-            x += 4 * LANES;
-        }
-        while x + LANES <= width {
-            hblur_block::<F, LANES>(kernel, &src[x..], &mut row[x..]);
-            x += LANES;
-        }
-        if x < width && width >= LANES {
-            // The last columns as one vector block overlapping the previous one (each column's
-            // value does not depend on its block), instead of one column at a time: a single
-            // accumulator waits on 11 multiply-adds in a row.
-            let x = width - LANES;
-            hblur_block::<F, LANES>(kernel, &src[x..], &mut row[x..]);
-        } else {
-            while x < width {
-                hblur_block::<F, 1>(kernel, &src[x..], &mut row[x..]);
-                x += 1;
-            }
+fn hblur_row<F: MulAdd>(kernel: &[f32; SSIM_WINDOW], src: &[f32], out: &mut [f32]) {
+    let width = out.len();
+    let mut x = 0;
+    while x + 4 * LANES <= width {
+        hblur_block::<F, { 4 * LANES }>(kernel, &src[x..], &mut out[x..]);
+        x += 4 * LANES;
+    }
+    while x + LANES <= width {
+        hblur_block::<F, LANES>(kernel, &src[x..], &mut out[x..]);
+        x += LANES;
+    }
+    if x < width && width >= LANES {
+        // The last columns as one vector block overlapping the previous one (each column's
+        // value does not depend on its block), instead of one column at a time: a single
+        // accumulator waits on 11 multiply-adds in a row.
+        let x = width - LANES;
+        hblur_block::<F, LANES>(kernel, &src[x..], &mut out[x..]);
+    } else {
+        while x < width {
+            hblur_block::<F, 1>(kernel, &src[x..], &mut out[x..]);
+            x += 1;
         }
     }
 }
 
-simd_dispatch!(hblur_rows => hblur_rows_impl::<MulAdd>(
-    kernel: &[f32; SSIM_WINDOW],
-    padded: &[f32],
-    out: &mut [f32],
-    width: usize,
-));
-
-/// `N` outputs of the vertical pass at column `x`: taps `k_lo..k_hi` (those whose source row
-/// `y + k - RADIUS` lies inside the plane) added in order from 0.
+/// `N` outputs of the vertical pass at column `x`: the taps `k` of `taps` (the source rows
+/// inside the plane), whose rows start at `offsets[k]` in the ring, added in order from 0.
+/// `FULL` (every tap inside) makes the tap count a constant, so the accumulators stay in
+/// registers instead of going through the stack on every tap.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn vblur_block<F: MulAdd, const N: usize>(
+fn vblur_block<F: MulAdd, const N: usize, const FULL: bool>(
     kernel: &[f32; SSIM_WINDOW],
-    plane: &[f32],
-    width: usize,
-    y: usize,
-    k_lo: usize,
-    k_hi: usize,
+    ring: &[f32],
+    offsets: &[usize; SSIM_WINDOW],
+    taps: std::ops::Range<usize>,
     x: usize,
     out: &mut [f32],
 ) {
+    let taps = if FULL { 0..SSIM_WINDOW } else { taps };
     let mut acc = [0.0f32; N];
-    for (k, &g) in kernel.iter().enumerate().take(k_hi).skip(k_lo) {
-        let at = (y + k - RADIUS) * width + x;
-        let s: &[f32; N] = plane[at..at + N].try_into().expect("block");
+    for k in taps {
+        let at = offsets[k] + x;
+        let s: &[f32; N] = ring[at..at + N].try_into().expect("block");
         for l in 0..N {
-            acc[l] = F::mul_add(g, s[l], acc[l]);
+            acc[l] = F::mul_add(kernel[k], s[l], acc[l]);
         }
     }
     out[x..x + N].copy_from_slice(&acc);
 }
 
-/// Vertical pass: output rows `first..` of the stacked planes (`height` rows of `width` each)
-/// from `src`, zero outside each plane.
+/// [`vblur_block`] over a whole row, in 32- and 8-column blocks.
 #[inline(always)]
-fn vblur_rows_impl<F: MulAdd>(
+fn vblur_blocks<F: MulAdd, const FULL: bool>(
     kernel: &[f32; SSIM_WINDOW],
-    src: &[f32],
+    ring: &[f32],
+    offsets: &[usize; SSIM_WINDOW],
+    taps: std::ops::Range<usize>,
     out: &mut [f32],
-    first: usize,
-    width: usize,
-    height: usize,
 ) {
-    for (i, row) in out.chunks_exact_mut(width).enumerate() {
-        let r = first + i;
-        let (plane, y) = (r / height, r % height);
-        let plane = &src[plane * height * width..(plane + 1) * height * width];
-        let k_lo = RADIUS.saturating_sub(y);
-        let k_hi = SSIM_WINDOW.min(height + RADIUS - y);
-        let mut x = 0;
-        while x + 4 * LANES <= width {
-            vblur_block::<F, { 4 * LANES }>(kernel, plane, width, y, k_lo, k_hi, x, row);
-            x += 4 * LANES;
-        }
-        while x + LANES <= width {
-            vblur_block::<F, LANES>(kernel, plane, width, y, k_lo, k_hi, x, row);
-            x += LANES;
-        }
-        if x < width && width >= LANES {
-            // As in `hblur_rows_impl`: one overlapping vector block for the last columns.
-            vblur_block::<F, LANES>(kernel, plane, width, y, k_lo, k_hi, width - LANES, row);
-        } else {
-            while x < width {
-                vblur_block::<F, 1>(kernel, plane, width, y, k_lo, k_hi, x, row);
-                x += 1;
-            }
+    let width = out.len();
+    let mut x = 0;
+    while x + 4 * LANES <= width {
+        vblur_block::<F, { 4 * LANES }, FULL>(kernel, ring, offsets, taps.clone(), x, out);
+        x += 4 * LANES;
+    }
+    while x + LANES <= width {
+        vblur_block::<F, LANES, FULL>(kernel, ring, offsets, taps.clone(), x, out);
+        x += LANES;
+    }
+    if x < width && width >= LANES {
+        // As in `hblur_row`: one overlapping vector block for the last columns.
+        vblur_block::<F, LANES, FULL>(kernel, ring, offsets, taps, width - LANES, out);
+    } else {
+        while x < width {
+            vblur_block::<F, 1, FULL>(kernel, ring, offsets, taps.clone(), x, out);
+            x += 1;
         }
     }
 }
 
-simd_dispatch!(vblur_rows => vblur_rows_impl::<MulAdd>(
+/// Vertical pass: row `y` of a plane of `height` rows, zero outside it, from the ring holding
+/// rows `y - RADIUS ..= y + RADIUS` (those inside the plane).
+#[inline(always)]
+fn vblur_row<F: MulAdd>(
     kernel: &[f32; SSIM_WINDOW],
-    src: &[f32],
-    out: &mut [f32],
-    first: usize,
-    width: usize,
+    ring: &[f32],
+    y: usize,
     height: usize,
-));
-
-/// Horizontal then vertical blur of stacked planes of `height` rows, zero outside each plane
-/// (the window is symmetric, so the same operator is its own adjoint and serves the backward
-/// pass too).
-fn blur_planes(
-    kernel: &[f32; SSIM_WINDOW],
-    width: usize,
-    height: usize,
-    padded: &[f32],
-    tmp: &mut [f32],
     out: &mut [f32],
 ) {
-    let pw = width + 2 * RADIUS;
-    tmp.par_chunks_mut(width * ROWS_PER_TASK)
-        .enumerate()
-        .for_each(|(t, rows)| {
-            let first = t * ROWS_PER_TASK;
-            let count = rows.len() / width;
-            hblur_rows(
-                kernel,
-                &padded[first * pw..(first + count) * pw],
-                rows,
-                width,
-            );
-        });
-    let tmp = &*tmp;
-    out.par_chunks_mut(width * ROWS_PER_TASK)
-        .enumerate()
-        .for_each(|(t, rows)| {
-            vblur_rows(kernel, tmp, rows, t * ROWS_PER_TASK, width, height);
-        });
+    let width = out.len();
+    let k_lo = RADIUS.saturating_sub(y);
+    let k_hi = SSIM_WINDOW.min(height + RADIUS - y);
+    let mut offsets = [0usize; SSIM_WINDOW];
+    for (k, o) in offsets.iter_mut().enumerate().take(k_hi).skip(k_lo) {
+        *o = ((y + k - RADIUS) % SSIM_WINDOW) * width;
+    }
+    if k_lo == 0 && k_hi == SSIM_WINDOW {
+        vblur_blocks::<F, true>(kernel, ring, &offsets, k_lo..k_hi, out);
+    } else {
+        vblur_blocks::<F, false>(kernel, ring, &offsets, k_lo..k_hi, out);
+    }
 }
 
-/// One plane row of step 3: the SSIM of each pixel from its blurred statistics (`stats[j]` is
+/// One row of step 3: the SSIM of each pixel from its blurred statistics (`stats[j]` is
 /// map `j`'s row), its weighted sum, and (when `grads` is given) the weighted partials w.r.t.
 /// the three means the SSIM depends on through x, written into the padded rows' interiors.
 #[inline(always)]
-fn partials_row_impl(
+fn partials_row(
     stats: [&[f32]; FWD],
     weights: Option<&[f32]>,
     uniform: f32,
@@ -320,19 +312,148 @@ fn partials_row_impl(
     ssim_out.iter().fold(0.0f64, |s, &v| s + v as f64)
 }
 
-simd_dispatch!(partials_row => partials_row_impl(
-    stats: [&[f32]; FWD],
-    weights: Option<&[f32]>,
+/// What every band of one SSIM evaluation shares.
+struct Frame<'a> {
+    kernel: [f32; SSIM_WINDOW],
+    /// Differentiated and target images, interleaved RGB.
+    x: &'a [f32],
+    y: &'a [f32],
+    width: usize,
+    height: usize,
+    pixel_weights: Option<&'a [f32]>,
     uniform: f32,
-    ssim_out: &mut [f32],
-    grads: Option<[&mut [f32]; BWD]>,
-) -> f64);
-
-/// Map `j`'s plane row `r` of a buffer of `rows`-row planes of `len` floats per row.
-fn map_row(buf: &[f32], j: usize, r: usize, rows: usize, len: usize) -> &[f32] {
-    let at = (j * rows + r) * len;
-    &buf[at..at + len]
 }
+
+/// Rows `y0..y1` of every channel: their weighted SSIM sums into `s.sums`, and with `v_rows`
+/// (those rows of `dS/dx`, interleaved RGB) the gradient.
+#[inline(always)]
+fn band_impl<F: MulAdd>(
+    f: &Frame,
+    y0: usize,
+    y1: usize,
+    s: &mut BandScratch,
+    mut v_rows: Option<&mut [f32]>,
+) {
+    let (w, h) = (f.width, f.height);
+    let pw = w + 2 * RADIUS;
+    let want_grad = v_rows.is_some();
+    // SSIM rows whose partials the band's gradient rows reach, and the image rows their
+    // windows reach: RADIUS beyond each.
+    let (st_lo, st_hi) = if want_grad {
+        (y0.saturating_sub(RADIUS), h.min(y1 + RADIUS))
+    } else {
+        (y0, y1)
+    };
+    let (in_lo, in_hi) = (st_lo.saturating_sub(RADIUS), h.min(st_hi + RADIUS));
+    let ring = SSIM_WINDOW * w;
+    for c in 0..3 {
+        let mut next_st = st_lo;
+        let mut next_out = y0;
+        for yi in in_lo..in_hi {
+            // 1. Products of image row yi, then their horizontal blurs into the ring.
+            {
+                let at = yi * w * 3;
+                let (xr, yr) = (&f.x[at..at + w * 3], &f.y[at..at + w * 3]);
+                let (px_, rest) = s.fwd_padded.split_at_mut(pw);
+                let (py_, rest) = rest.split_at_mut(pw);
+                let (pxx, rest) = rest.split_at_mut(pw);
+                let (pyy, pxy) = rest.split_at_mut(pw);
+                let interior = RADIUS..RADIUS + w;
+                let (px_, py_) = (&mut px_[interior.clone()], &mut py_[interior.clone()]);
+                let (pxx, pyy) = (&mut pxx[interior.clone()], &mut pyy[interior.clone()]);
+                let pxy = &mut pxy[interior];
+                for p in 0..w {
+                    let (a, b) = (xr[p * 3 + c], yr[p * 3 + c]);
+                    px_[p] = a;
+                    py_[p] = b;
+                    pxx[p] = a * a;
+                    pyy[p] = b * b;
+                    pxy[p] = a * b;
+                }
+            }
+            let slot = (yi % SSIM_WINDOW) * w;
+            for j in 0..FWD {
+                let src = &s.fwd_padded[j * pw..(j + 1) * pw];
+                let out = &mut s.fwd_ring[j * ring + slot..j * ring + slot + w];
+                hblur_row::<F>(&f.kernel, src, out);
+            }
+            // 2. Every SSIM row whose window the ring now holds.
+            let last_in = yi + 1 == in_hi;
+            while next_st < st_hi && (next_st + RADIUS <= yi || last_in) {
+                let ys = next_st;
+                next_st += 1;
+                for j in 0..FWD {
+                    let src = &s.fwd_ring[j * ring..(j + 1) * ring];
+                    vblur_row::<F>(&f.kernel, src, ys, h, &mut s.stats[j * w..(j + 1) * w]);
+                }
+                // 3. Its SSIM and weighted partials.
+                let stats: [&[f32]; FWD] = [
+                    &s.stats[..w],
+                    &s.stats[w..2 * w],
+                    &s.stats[2 * w..3 * w],
+                    &s.stats[3 * w..4 * w],
+                    &s.stats[4 * w..],
+                ];
+                let weights = f.pixel_weights.map(|a| &a[ys * w..(ys + 1) * w]);
+                let grads = if want_grad {
+                    let (d_mu, rest) = s.bwd_padded.split_at_mut(pw);
+                    let (d_var, d_cov) = rest.split_at_mut(pw);
+                    let interior = RADIUS..RADIUS + w;
+                    Some([
+                        &mut d_mu[interior.clone()],
+                        &mut d_var[interior.clone()],
+                        &mut d_cov[interior],
+                    ])
+                } else {
+                    None
+                };
+                let sum = partials_row(stats, weights, f.uniform, &mut s.ssim_row, grads);
+                if (y0..y1).contains(&ys) {
+                    s.sums[c * (y1 - y0) + ys - y0] = sum;
+                }
+                let Some(v_rows) = v_rows.as_deref_mut() else {
+                    continue;
+                };
+                // 4. The partials' horizontal blurs into the second ring, then every gradient
+                // row whose window it now holds: the adjoint of the blur (the same blur: the
+                // window is symmetric), then through the products x, x², x·y.
+                let slot = (ys % SSIM_WINDOW) * w;
+                for j in 0..BWD {
+                    let src = &s.bwd_padded[j * pw..(j + 1) * pw];
+                    let out = &mut s.bwd_ring[j * ring + slot..j * ring + slot + w];
+                    hblur_row::<F>(&f.kernel, src, out);
+                }
+                let last_st = ys + 1 == st_hi;
+                while next_out < y1 && (next_out + RADIUS <= ys || last_st) {
+                    let yo = next_out;
+                    next_out += 1;
+                    for j in 0..BWD {
+                        let src = &s.bwd_ring[j * ring..(j + 1) * ring];
+                        let out = &mut s.bwd_rows[j * w..(j + 1) * w];
+                        vblur_row::<F>(&f.kernel, src, yo, h, out);
+                    }
+                    let (b0, rest) = s.bwd_rows.split_at(w);
+                    let (b1, b2) = rest.split_at(w);
+                    let at = yo * w * 3;
+                    let (xr, yr) = (&f.x[at..at + w * 3], &f.y[at..at + w * 3]);
+                    let row = &mut v_rows[(yo - y0) * w * 3..(yo - y0 + 1) * w * 3];
+                    for px in 0..w {
+                        let i = px * 3 + c;
+                        row[i] = b0[px] + 2.0 * xr[i] * b1[px] + yr[i] * b2[px];
+                    }
+                }
+            }
+        }
+    }
+}
+
+simd_dispatch!(band => band_impl::<MulAdd>(
+    f: &Frame,
+    y0: usize,
+    y1: usize,
+    s: &mut BandScratch,
+    v_rows: Option<&mut [f32]>,
+));
 
 /// Weighted SSIM `S = Σ_{p,c} a_p · ssim_{p,c}` of two interleaved RGB images and, when
 /// `v_x` is given, its exact gradient `dS/dx` written (not added) into `v_x`.
@@ -348,6 +469,29 @@ pub fn ssim_with_grad(
     pixel_weights: Option<&[f32]>,
     v_x: Option<&mut [f32]>,
 ) -> f64 {
+    // One band per thread: the fewest recomputed margin rows that still keeps every thread
+    // busy. The band count changes no bit of the result.
+    let bands = rayon::current_num_threads().max(1);
+    let band_rows = (height as usize)
+        .div_ceil(bands)
+        .max(MIN_BAND_ROWS)
+        .min(height as usize)
+        .max(1);
+    ssim_in_bands(ws, x, y, width, height, pixel_weights, v_x, band_rows)
+}
+
+/// [`ssim_with_grad`] with bands of `band_rows` image rows.
+#[allow(clippy::too_many_arguments)]
+fn ssim_in_bands(
+    ws: &mut SsimWorkspace,
+    x: &[f32],
+    y: &[f32],
+    width: u32,
+    height: u32,
+    pixel_weights: Option<&[f32]>,
+    v_x: Option<&mut [f32]>,
+    band_rows: usize,
+) -> f64 {
     let (w, h) = (width as usize, height as usize);
     let n = w * h;
     assert_eq!(x.len(), n * 3, "ssim: rendered image size");
@@ -355,91 +499,101 @@ pub fn ssim_with_grad(
     if let Some(a) = pixel_weights {
         assert_eq!(a.len(), n, "ssim: pixel weight count");
     }
+    if let Some(v) = &v_x {
+        assert_eq!(v.len(), n * 3, "ssim: gradient buffer size");
+    }
     if n == 0 {
         return 0.0;
     }
-    ws.ensure(w, h);
-    let kernel = ws.kernel;
-    let uniform = 1.0 / (3.0 * n as f32);
-    let rows = 3 * h;
-    let pw = w + 2 * RADIUS;
-
-    // 1. Per-pixel products, written between the zero pads of each map's row.
-    {
-        let mut maps = ws.fwd_padded.chunks_exact_mut(rows * pw);
-        let mut next = || maps.next().expect("FWD planes").par_chunks_mut(pw);
-        (next(), next(), next(), next(), next())
-            .into_par_iter()
-            .enumerate()
-            .for_each(|(r, (px_, py_, pxx, pyy, pxy))| {
-                let (c, yy) = (r / h, r % h);
-                let interior = RADIUS..RADIUS + w;
-                let (px_, py_) = (&mut px_[interior.clone()], &mut py_[interior.clone()]);
-                let (pxx, pyy) = (&mut pxx[interior.clone()], &mut pyy[interior.clone()]);
-                let pxy = &mut pxy[interior];
-                let (xr, yr) = (
-                    &x[yy * w * 3..(yy + 1) * w * 3],
-                    &y[yy * w * 3..(yy + 1) * w * 3],
-                );
-                for p in 0..w {
-                    let (a, b) = (xr[p * 3 + c], yr[p * 3 + c]);
-                    px_[p] = a;
-                    py_[p] = b;
-                    pxx[p] = a * a;
-                    pyy[p] = b * b;
-                    pxy[p] = a * b;
-                }
-            });
-    }
-    // 2. Local means of the five maps.
-    blur_planes(&kernel, w, h, &ws.fwd_padded, &mut ws.fwd_h, &mut ws.stats);
-    // 3. The SSIM map, its weighted sum per row and the weighted partials w.r.t. the means.
-    let want_grad = v_x.is_some();
-    let stats = &ws.stats;
-    {
-        let mut maps = ws.bwd_padded.chunks_exact_mut(rows * pw);
-        let mut next = || maps.next().expect("BWD planes").par_chunks_mut(pw);
-        (next(), next(), next())
-            .into_par_iter()
-            .zip(ws.row_sums.par_iter_mut())
-            .zip(ws.ssim_map.par_chunks_mut(w))
-            .enumerate()
-            .for_each(|(r, (((d_mu, d_var, d_cov), row_sum), ssim_row))| {
-                let yy = r % h;
-                let s = std::array::from_fn(|j| map_row(stats, j, r, rows, w));
-                let weights = pixel_weights.map(|a| &a[yy * w..(yy + 1) * w]);
-                let interior = RADIUS..RADIUS + w;
-                let grads = want_grad.then(|| {
-                    [
-                        &mut d_mu[interior.clone()],
-                        &mut d_var[interior.clone()],
-                        &mut d_cov[interior.clone()],
-                    ]
-                });
-                *row_sum = partials_row(s, weights, uniform, ssim_row, grads);
-            });
-    }
-    let total: f64 = ws.row_sums.iter().sum();
-    let Some(v_x) = v_x else {
-        return total;
+    ws.ensure(w, h, band_rows);
+    let frame = Frame {
+        kernel: ws.kernel,
+        x,
+        y,
+        width: w,
+        height: h,
+        pixel_weights,
+        uniform: 1.0 / (3.0 * n as f32),
     };
-    assert_eq!(v_x.len(), n * 3, "ssim: gradient buffer size");
-    // 4. Adjoint of the blur (the same blur), then through the products x, x², x·y.
-    blur_planes(&kernel, w, h, &ws.bwd_padded, &mut ws.bwd_h, &mut ws.bwd);
-    let bwd = &ws.bwd;
-    v_x.par_chunks_mut(w * 3).enumerate().for_each(|(yy, row)| {
-        let (xr, yr) = (
-            &x[yy * w * 3..(yy + 1) * w * 3],
-            &y[yy * w * 3..(yy + 1) * w * 3],
-        );
+    let run = |(b, (s, v_rows)): (usize, (&mut BandScratch, Option<&mut [f32]>))| {
+        let y0 = b * band_rows;
+        band(&frame, y0, h.min(y0 + band_rows), s, v_rows);
+    };
+    match v_x {
+        Some(v_x) => ws
+            .bands
+            .par_iter_mut()
+            .zip(v_x.par_chunks_mut(band_rows * w * 3).map(Some))
+            .enumerate()
+            .for_each(run),
+        None => ws
+            .bands
+            .par_iter_mut()
+            .map(|s| (s, None))
+            .enumerate()
+            .for_each(run),
+    }
+    // Per plane row `c · h + y`, in that order, as one sequence: the same sum for any bands.
+    for (b, s) in ws.bands.iter().enumerate() {
+        let (y0, y1) = (b * band_rows, h.min((b + 1) * band_rows));
         for c in 0..3 {
-            let r = c * h + yy;
-            let [b0, b1, b2] = std::array::from_fn(|j| map_row(bwd, j, r, rows, w));
-            for px in 0..w {
-                let i = px * 3 + c;
-                row[i] = b0[px] + 2.0 * xr[i] * b1[px] + yr[i] * b2[px];
+            ws.row_sums[c * h + y0..c * h + y1]
+                .copy_from_slice(&s.sums[c * (y1 - y0)..(c + 1) * (y1 - y0)]);
+        }
+    }
+    ws.row_sums.iter().sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image(n: usize, seed: u64) -> Vec<f32> {
+        let mut rng = fastrand::Rng::with_seed(seed);
+        (0..n).map(|_| rng.f32()).collect()
+    }
+
+    /// Bands recompute their margins; every band height, down to one row (margins larger than
+    /// the band) and up to the whole image, must give the same bits, with and without the
+    /// gradient and the pixel weights.
+    #[test]
+    fn every_band_height_gives_the_same_bits() {
+        for (w, h) in [(37u32, 29u32), (9, 4), (3, 23)] {
+            let n = (w * h) as usize;
+            let (x, y, weights) = (image(n * 3, 1), image(n * 3, 2), image(n, 3));
+            for pixel_weights in [None, Some(&weights[..])] {
+                let mut want = None;
+                for band_rows in [h as usize, 1, 2, 5, 11, 16] {
+                    let mut ws = SsimWorkspace::new();
+                    let mut grad = vec![f32::NAN; n * 3];
+                    let with_grad = ssim_in_bands(
+                        &mut ws,
+                        &x,
+                        &y,
+                        w,
+                        h,
+                        pixel_weights,
+                        Some(&mut grad),
+                        band_rows,
+                    );
+                    let value =
+                        ssim_in_bands(&mut ws, &x, &y, w, h, pixel_weights, None, band_rows);
+                    assert_eq!(
+                        with_grad.to_bits(),
+                        value.to_bits(),
+                        "{w}x{h} / {band_rows}"
+                    );
+                    let bits: Vec<u32> = grad.iter().map(|g| g.to_bits()).collect();
+                    assert!(grad.iter().all(|g| g.is_finite()), "{w}x{h} / {band_rows}");
+                    match &want {
+                        None => want = Some((value.to_bits(), bits)),
+                        Some(want) => {
+                            assert_eq!(want.0, value.to_bits(), "{w}x{h} / {band_rows}");
+                            assert!(want.1 == bits, "{w}x{h} / {band_rows}: gradient bits");
+                        }
+                    }
+                }
             }
         }
-    });
-    total
+    }
 }
