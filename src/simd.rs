@@ -31,7 +31,7 @@ impl MulAdd for Separate {
 }
 
 /// Defines `$name`, which runs the `#[inline(always)]` kernel `$kernel` compiled for AVX-512VL
-/// or else AVX2 (both with FMA) when the CPU has it (8-lane vectors instead of baseline SSE2's
+/// or else AVX2 (both with FMA and POPCNT) when the CPU has it (8-lane vectors instead of baseline SSE2's
 /// 4), and the baseline build otherwise. Kernels that add in a fixed order and use no FMA give
 /// the same bits on every path. A kernel written `$kernel::<MulAdd>` is generic over
 /// [`MulAdd`]: it gets [`Fused`] in the AVX builds and [`Separate`] in the baseline one, so its
@@ -62,7 +62,7 @@ macro_rules! simd_dispatch {
         fn $name($($arg: $ty),*) $(-> $ret)? {
             #[cfg(target_arch = "x86_64")]
             {
-                #[target_feature(enable = "avx2,fma")]
+                #[target_feature(enable = "avx2,fma,popcnt")]
                 #[allow(clippy::too_many_arguments)]
                 fn avx2($($arg: $ty),*) $(-> $ret)? {
                     $($fast)*($($arg),*)
@@ -71,23 +71,24 @@ macro_rules! simd_dispatch {
                 // of 16 (the blend loops keep their polynomial constants in registers instead
                 // of reloading them) and mask registers for the compares. Rust never contracts
                 // `a * b + c` into an FMA: only explicit `MulAdd::mul_add` calls become one.
-                #[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+                #[target_feature(enable = "avx2,fma,popcnt,avx512f,avx512vl")]
                 #[allow(clippy::too_many_arguments)]
                 fn avx512($($arg: $ty),*) $(-> $ret)? {
                     $($fast)*($($arg),*)
                 }
                 let avx2_fma = std::arch::is_x86_feature_detected!("avx2")
-                    && std::arch::is_x86_feature_detected!("fma");
+                    && std::arch::is_x86_feature_detected!("fma")
+                    && std::arch::is_x86_feature_detected!("popcnt");
                 if avx2_fma
                     && std::arch::is_x86_feature_detected!("avx512f")
                     && std::arch::is_x86_feature_detected!("avx512vl")
                 {
-                    // SAFETY: the CPU supports AVX2, FMA, AVX-512F and AVX-512VL (checked just
-                    // above), every feature this build enables.
+                    // SAFETY: the CPU supports AVX2, FMA, POPCNT, AVX-512F and AVX-512VL
+                    // (checked just above), every feature this build enables.
                     return unsafe { avx512($($arg),*) };
                 }
                 if avx2_fma {
-                    // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+                    // SAFETY: the CPU supports AVX2, FMA and POPCNT (checked just above).
                     return unsafe { avx2($($arg),*) };
                 }
             }

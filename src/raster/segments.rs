@@ -186,8 +186,10 @@ simd_dispatch!(
 
 /// The pixel columns `[x0, x1)` and rows `[y0, y1)` of a tile whose centres lie in a Gaussian's
 /// extent box and in the image (`ox, oy` is the tile's top-left pixel, `inside` its columns and
-/// rows within the image, [`TileBins::tile_extent`]). The edge tiles' pixels past the image are
-/// never blended: the forward starts them finished.
+/// rows within the image, [`TileBins::tile_extent`]), as whole numbers in floats: the mask
+/// compares them with float rows and columns, and a round trip through `usize` cost a saturating
+/// conversion each. The edge tiles' pixels past the image are never blended: the forward starts
+/// them finished.
 #[inline(always)]
 pub(crate) fn footprint(
     p: &Projected,
@@ -195,11 +197,11 @@ pub(crate) fn footprint(
     ox: f32,
     oy: f32,
     (columns, rows): (usize, usize),
-) -> [usize; 4] {
+) -> [f32; 4] {
     let m = p.means2d[g];
     let e = p.extents[g];
-    let lo = |v: f32, n: usize| v.ceil().max(0.0).min(n as f32) as usize;
-    let hi = |v: f32, n: usize| (v.floor() + 1.0).max(0.0).min(n as f32) as usize;
+    let lo = |v: f32, n: usize| v.ceil().max(0.0).min(n as f32);
+    let hi = |v: f32, n: usize| (v.floor() + 1.0).max(0.0).min(n as f32);
     [
         lo(m.x - e.x - 0.5 - ox, columns),
         lo(m.y - e.y - 0.5 - oy, rows),
@@ -213,12 +215,13 @@ pub(crate) fn footprint(
 /// `power <= ln(opacity / threshold)`, padded, clipped to the footprint `[x0, y0, x1, y1]`.
 /// Pixels outside it would be skipped by the blend loop anyway, so visiting only these changes
 /// no result; it saves the work on the ellipse's rounded ends. All 16 rows at once so the
-/// square roots and divisions vectorise instead of running one dependent chain per row.
+/// square roots vectorise instead of running one dependent chain per row. The 0.05 px padding
+/// dwarfs the rounding of the chord (a reciprocal instead of two divisions included).
 #[inline(always)]
 pub(crate) fn segment_mask(
     sp: &Splat2d,
     power_max: f32,
-    [x0, y0, x1, y1]: [usize; 4],
+    [x0, y0, x1, y1]: [f32; 4],
     ox: f32,
     oy: f32,
 ) -> u32 {
@@ -226,32 +229,38 @@ pub(crate) fn segment_mask(
         return 0;
     }
     let ts = TS as f32;
-    let (fx0, fx1) = (x0 as f32, x1 as f32);
-    let mut lo = [fx0; TS];
-    let mut hi = [fx1; TS];
+    let mut lo = [x0; TS];
+    let mut hi = [x1; TS];
     if power_max.is_finite() {
+        let inv_a = 1.0 / sp.a;
+        let two_power = 2.0 * power_max;
+        // Pixel centre ox + x + 0.5 = mean.x - dx, padded by 0.05 px either side.
+        let (left_of_mean, right_of_mean) = (sp.mx - 0.5 - ox - 0.05, sp.mx - 0.5 - ox + 0.05);
         for y in 0..TS {
             let dy = sp.my - (oy + y as f32 + 0.5);
             // 0.5 (a dx² + c dy²) + b dx dy <= P  <=>  a dx² + 2 b dy dx + c dy² - 2 P <= 0.
-            let disc = sp.b * sp.b * dy * dy - sp.a * (sp.c * dy * dy - 2.0 * power_max);
+            let disc = sp.b * sp.b * dy * dy - sp.a * (sp.c * dy * dy - two_power);
             let root = disc.max(0.0).sqrt();
-            let dx_lo = (-sp.b * dy - root) / sp.a;
-            let dx_hi = (-sp.b * dy + root) / sp.a;
-            // Pixel centre ox + x + 0.5 = mean.x - dx.
-            let l = (sp.mx - dx_hi - 0.5 - ox - 0.05).ceil().max(0.0).min(ts);
-            let h = ((sp.mx - dx_lo - 0.5 - ox + 0.05).floor() + 1.0)
+            let b_dy = sp.b * dy;
+            // The roots are dx = (-b dy ± root) / a; the columns are mean.x - dx.
+            let l = (left_of_mean + (b_dy - root) * inv_a)
+                .ceil()
+                .max(0.0)
+                .min(ts);
+            let h = ((right_of_mean + (b_dy + root) * inv_a).floor() + 1.0)
                 .max(0.0)
                 .min(ts);
             // `!(disc >= 0)` also empties the row when disc is NaN.
             let empty = !(disc >= 0.0);
-            lo[y] = if empty { ts } else { l.max(fx0) };
-            hi[y] = if empty { 0.0 } else { h.min(fx1) };
+            lo[y] = if empty { ts } else { l.max(x0) };
+            hi[y] = if empty { 0.0 } else { h.min(x1) };
         }
     }
     let lanes = LANES as f32;
     let mut bits = [0u32; TS];
     for y in 0..TS {
-        let rows = y >= y0 && y < y1 && lo[y] < hi[y];
+        let row = y as f32;
+        let rows = row >= y0 && row < y1 && lo[y] < hi[y];
         let left = rows && lo[y] < lanes;
         let right = rows && hi[y] > lanes;
         bits[y] = ((left as u32) | ((right as u32) << 1)) << (2 * y);
