@@ -207,22 +207,82 @@ struct Update<'a> {
     visible: Option<&'a [bool]>,
 }
 
+/// What an update found not finite among the gradients it read and the values it wrote, as the
+/// OR of `x * 0` bit patterns: `±0` for finite `x`, NaN otherwise. Integer ORs vectorise with
+/// the update (a float sum would not: it cannot be reordered) and cost nothing next to its
+/// memory traffic, which is why the training loop's guards live here rather than in two more
+/// passes over the gradients and parameters.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct FiniteCheck {
+    grad_bits: u32,
+    param_bits: u32,
+}
+
+impl FiniteCheck {
+    #[inline(always)]
+    fn see(&mut self, grad: f32, param: f32) {
+        self.grad_bits |= (grad * 0.0).to_bits();
+        self.param_bits |= (param * 0.0).to_bits();
+    }
+
+    fn merge(self, other: FiniteCheck) -> FiniteCheck {
+        FiniteCheck {
+            grad_bits: self.grad_bits | other.grad_bits,
+            param_bits: self.param_bits | other.param_bits,
+        }
+    }
+
+    fn verdict(self, group: ParamGroup) -> Option<NonFinite> {
+        const MAGNITUDE: u32 = 0x7FFF_FFFF;
+        if self.grad_bits & MAGNITUDE != 0 {
+            Some(NonFinite::Gradient(group))
+        } else if self.param_bits & MAGNITUDE != 0 {
+            Some(NonFinite::Parameter(group))
+        } else {
+            None
+        }
+    }
+}
+
+/// The first NaN/Inf an Adam step met, in group order: a gradient it applied, or a parameter it
+/// produced. A non-finite gradient makes its moments and its parameter non-finite too, so
+/// either way the model is damaged and must be restored. Gradients of Gaussians or groups the
+/// step leaves alone (frozen, invisible, switched off) are not looked at: they change nothing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NonFinite {
+    Gradient(ParamGroup),
+    Parameter(ParamGroup),
+}
+
+impl std::fmt::Display for NonFinite {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NonFinite::Gradient(g) => write!(f, "gradient of {} is not finite", g.name()),
+            NonFinite::Parameter(g) => write!(f, "{} became non-finite", g.name()),
+        }
+    }
+}
+
 /// One Adam update of a contiguous run of values (vectorisable: no indexing in the loop).
 #[inline(always)]
-fn adam_run(p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32], u: &Update) {
+fn adam_run(p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32], u: &Update) -> FiniteCheck {
     let step_size = u.lr / u.bias1;
     let inv_bias2_sqrt = 1.0 / u.bias2_sqrt;
+    let mut check = FiniteCheck::default();
     for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
         *m = u.beta1 * *m + (1.0 - u.beta1) * g;
         *v = u.beta2 * *v + (1.0 - u.beta2) * g * g;
         *p -= step_size * *m / (v.sqrt() * inv_bias2_sqrt + u.eps);
+        check.see(g, *p);
     }
+    check
 }
 
 /// [`adam_run`] where only values with `keep` set change: every lane computes the update and a
 /// select keeps or drops it, so the loop stays one vector loop (a branch per Gaussian would
 /// leave 1–4 values between branches, all scalar square roots and divisions). The kept lanes
-/// get the same bits as `adam_run`.
+/// get the same bits as `adam_run`. Only kept lanes' gradients are checked: a dropped lane's
+/// gradient changes nothing, so a reported gradient is always one that damaged its parameter.
 #[inline(always)]
 fn adam_run_masked(
     p: &mut [f32],
@@ -231,9 +291,10 @@ fn adam_run_masked(
     v: &mut [f32],
     keep: &[bool],
     u: &Update,
-) {
+) -> FiniteCheck {
     let step_size = u.lr / u.bias1;
     let inv_bias2_sqrt = 1.0 / u.bias2_sqrt;
+    let mut check = FiniteCheck::default();
     for ((((p, &g), m), v), &k) in p
         .iter_mut()
         .zip(g)
@@ -247,7 +308,9 @@ fn adam_run_masked(
         *m = if k { m_new } else { *m };
         *v = if k { v_new } else { *v };
         *p = if k { p_new } else { *p };
+        check.see(if k { g } else { 0.0 }, *p);
     }
+    check
 }
 
 /// Gaussians whose keep flags a contiguous group expands per value at a time (on the stack).
@@ -272,8 +335,9 @@ fn update_chunk_impl(
     offset: usize,
     len: usize,
     u: &Update,
-) {
+) -> FiniteCheck {
     let count = p.len() / stride;
+    let mut check = FiniteCheck::default();
     let keeps = |gi: usize| !(u.frozen[gi] || u.visible.is_some_and(|vis| !vis[gi]));
     if stride == len && len <= MAX_CONTIGUOUS {
         // The group is the whole array: blocks of Gaussians, one flat (masked) run each.
@@ -291,28 +355,29 @@ fn update_chunk_impl(
             let vals = start * len..end * len;
             let (p, g) = (&mut p[vals.clone()], &g[vals.clone()]);
             let (m, v) = (&mut m[vals.clone()], &mut v[vals]);
-            if all {
-                adam_run(p, g, m, v, u);
+            check = check.merge(if all {
+                adam_run(p, g, m, v, u)
             } else {
-                adam_run_masked(p, g, m, v, &keep[..(end - start) * len], u);
-            }
+                adam_run_masked(p, g, m, v, &keep[..(end - start) * len], u)
+            });
             start = end;
         }
-        return;
+        return check;
     }
     for i in 0..count {
         if !keeps(first + i) {
             continue;
         }
         let at = i * stride + offset;
-        adam_run(
+        check = check.merge(adam_run(
             &mut p[at..at + len],
             &g[at..at + len],
             &mut m[i * len..(i + 1) * len],
             &mut v[i * len..(i + 1) * len],
             u,
-        );
+        ));
     }
+    check
 }
 
 simd_dispatch!(
@@ -329,7 +394,7 @@ simd_dispatch!(
         offset: usize,
         len: usize,
         u: &Update,
-    )
+    ) -> FiniteCheck
 );
 
 /// Updates one group stored with `stride` values per Gaussian of which `offset..offset+len`
@@ -341,10 +406,10 @@ fn update_group(
     stride: usize,
     offset: usize,
     u: Update,
-) {
+) -> FiniteCheck {
     let len = mom.per_gaussian;
     if len == 0 || params.is_empty() {
-        return;
+        return FiniteCheck::default();
     }
     let chunk = GAUSSIANS_PER_TASK;
     params
@@ -356,9 +421,8 @@ fn update_group(
                 .zip(mom.v.par_chunks_mut(len * chunk)),
         )
         .enumerate()
-        .for_each(|(t, ((p, g), (m, v)))| {
-            update_chunk(p, g, m, v, t * chunk, stride, offset, len, &u);
-        });
+        .map(|(t, ((p, g), (m, v)))| update_chunk(p, g, m, v, t * chunk, stride, offset, len, &u))
+        .reduce(FiniteCheck::default, FiniteCheck::merge)
 }
 
 impl Adam {
@@ -393,6 +457,8 @@ impl Adam {
     /// One Adam step of every enabled group with the rates `lrs` (see `LearningRates::for_step`).
     /// Frozen Gaussians (`splats.meta.frozen`) and, if `visible` is given, invisible ones keep
     /// their parameters and moments (gsplat's "visible Adam"); otherwise updates are dense as in 3DGS.
+    /// Returns the first NaN/Inf among the gradients it applied and the parameters it wrote; the
+    /// step is then half done, and the caller restores a checkpoint.
     pub fn step(
         &mut self,
         splats: &mut Splats,
@@ -400,7 +466,7 @@ impl Adam {
         lrs: &[f32; 7],
         groups: &GroupFlags,
         visible: Option<&[bool]>,
-    ) {
+    ) -> Option<NonFinite> {
         let n = splats.len();
         assert_eq!(self.len, n, "Adam state out of step with the splats");
         assert_eq!(splats.meta.frozen.len(), n, "frozen flags length");
@@ -420,6 +486,7 @@ impl Adam {
         if let Some(v) = visible {
             assert_eq!(v.len(), n, "visibility length");
         }
+        let mut found = None;
         for group in ParamGroup::ALL {
             let gi = group.index();
             if !groups.0[gi] {
@@ -438,37 +505,39 @@ impl Adam {
                 frozen: &splats.meta.frozen,
                 visible,
             };
-            match group {
+            let check = match group {
                 ParamGroup::Means => {
                     let p: &mut [f32] = bytemuck::cast_slice_mut(&mut splats.means);
-                    update_group(p, bytemuck::cast_slice(grads.v_means), mom, 3, 0, u);
+                    update_group(p, bytemuck::cast_slice(grads.v_means), mom, 3, 0, u)
                 }
                 ParamGroup::LogScales => {
                     let p: &mut [f32] = bytemuck::cast_slice_mut(&mut splats.log_scales);
-                    update_group(p, bytemuck::cast_slice(grads.v_log_scales), mom, 3, 0, u);
+                    update_group(p, bytemuck::cast_slice(grads.v_log_scales), mom, 3, 0, u)
                 }
                 ParamGroup::Rotations => {
                     let p: &mut [f32] = bytemuck::cast_slice_mut(&mut splats.rotations);
-                    update_group(p, bytemuck::cast_slice(grads.v_rotations), mom, 4, 0, u);
+                    update_group(p, bytemuck::cast_slice(grads.v_rotations), mom, 4, 0, u)
                 }
-                ParamGroup::RawOpacities => {
-                    update_group(
-                        &mut splats.raw_opacities,
-                        grads.v_raw_opacities,
-                        mom,
-                        1,
-                        0,
-                        u,
-                    );
-                }
+                ParamGroup::RawOpacities => update_group(
+                    &mut splats.raw_opacities,
+                    grads.v_raw_opacities,
+                    mom,
+                    1,
+                    0,
+                    u,
+                ),
                 ParamGroup::ShDc => update_group(&mut splats.sh, grads.v_sh, mom, k3, 0, u),
                 ParamGroup::ShRest => update_group(&mut splats.sh, grads.v_sh, mom, k3, 3, u),
                 ParamGroup::RawLabels => {
                     let c = splats.label_channels;
-                    update_group(&mut splats.raw_labels, grads.v_raw_labels, mom, c, 0, u);
+                    update_group(&mut splats.raw_labels, grads.v_raw_labels, mom, c, 0, u)
                 }
+            };
+            if found.is_none() {
+                found = check.verdict(group);
             }
         }
+        found
     }
 
     /// Zero moments for `n` Gaussians appended at the end (3DGS `densification_postfix`).

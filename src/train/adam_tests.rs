@@ -166,3 +166,51 @@ fn position_rate_scales_with_extent_and_decays() {
     assert!((b[0] - 1.6e-6 * 5.0).abs() < 1e-11);
     assert_eq!(a[ParamGroup::ShRest.index()], 2.5e-3 / 20.0);
 }
+
+#[test]
+fn a_step_reports_the_first_non_finite_value_it_applied_or_wrote() {
+    let clean = Grads::constant(&model(3), 0.5);
+    let mut s = model(3);
+    let mut adam = Adam::new(&s);
+    let step = |s: &mut Splats, adam: &mut Adam, g: &Grads, lrs: [f32; 7]| {
+        adam.step(s, &g.view(), &lrs, &GroupFlags::ALL_ON, None)
+    };
+    assert_eq!(step(&mut s, &mut adam, &clean, [0.1; 7]), None);
+
+    // A NaN gradient of one SH-rest value (the strided path) and one of an opacity (a
+    // contiguous group, later in the order than rotations): the earlier group is reported.
+    let mut bad = Grads::constant(&s, 0.5);
+    bad.sh[12 + 5] = f32::NAN;
+    bad.op[2] = f32::INFINITY;
+    let found = step(&mut s, &mut adam, &bad, [0.1; 7]);
+    assert_eq!(found, Some(NonFinite::Gradient(ParamGroup::RawOpacities)));
+    assert!(s.raw_opacities[2].is_nan(), "the damaged value is written");
+
+    // A finite gradient whose update overflows.
+    let mut s = model(3);
+    let mut adam = Adam::new(&s);
+    let mut lrs = [0.1; 7];
+    lrs[ParamGroup::LogScales.index()] = f32::MAX;
+    let found = step(&mut s, &mut adam, &clean, lrs);
+    assert_eq!(found, Some(NonFinite::Parameter(ParamGroup::LogScales)));
+    assert_eq!(
+        found.map(|f| f.to_string()).as_deref(),
+        Some("log_scales became non-finite")
+    );
+
+    // Gradients the step does not apply are not looked at: a frozen Gaussian's, an invisible
+    // one's, a switched-off group's.
+    let mut s = model(3);
+    s.meta.frozen[0] = true;
+    let mut adam = Adam::new(&s);
+    let mut ignored = Grads::constant(&s, 0.5);
+    ignored.op[0] = f32::NAN;
+    ignored.v3[1] = Vec3::splat(f32::NAN);
+    ignored.lb[4] = f32::NAN;
+    let visible = [true, false, true];
+    let mut flags = GroupFlags::ALL_ON;
+    flags.set(ParamGroup::RawLabels, false);
+    let found = adam.step(&mut s, &ignored.view(), &[0.1; 7], &flags, Some(&visible));
+    assert_eq!(found, None);
+    assert!(s.raw_opacities.iter().all(|v| v.is_finite()));
+}

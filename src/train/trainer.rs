@@ -13,7 +13,7 @@ use crate::splats::Splats;
 use crate::train::adam::{Adam, GroupFlags, LearningRates, ParamGrads};
 use crate::train::densify::{Densifier, camera_extent};
 use crate::train::evaluate::{EvalScores, evaluate_with};
-use crate::train::guards::{first_non_finite_grad, first_non_finite_param};
+use crate::train::guards::first_non_finite_param;
 use crate::train::loss::{LabelLossParams, LossWorkspace, label_loss, photometric_loss};
 use crate::train::schedule::sh_degree_for_step;
 use crate::train::spec::{TrainSpec, TrainView};
@@ -152,7 +152,7 @@ impl Trainer {
         views: Vec<TrainView>,
     ) -> Result<Trainer, TrainError> {
         splats.check_lengths().map_err(TrainError::Splats)?;
-        if let Some(what) = first_non_finite_param(&splats, None) {
+        if let Some(what) = first_non_finite_param(&splats) {
             return Err(TrainError::NonFinite(what));
         }
         let views = match &spec.views {
@@ -423,14 +423,8 @@ impl Trainer {
         self.timings.rasterize_backward += parts.raster_backward.as_secs_f64();
         self.timings.project_backward += parts.project_backward.as_secs_f64();
 
-        let t = Instant::now();
-        let bad_grad = first_non_finite_grad(&self.grads, &self.splats);
-        self.timings.checks += t.elapsed().as_secs_f64();
-        if let Some(what) = bad_grad {
-            return self.roll_back(step, started, format!("gradient of {what} is not finite"));
-        }
-
-        // Optimiser.
+        // Optimiser. It also checks every gradient it reads and every value it writes, so a
+        // NaN/Inf from the backward or from the update itself rolls the step back.
         let t = Instant::now();
         let lrs = self.lrs.for_step(step, self.extent);
         let grads = ParamGrads {
@@ -441,7 +435,7 @@ impl Trainer {
             v_sh: &self.grads.v_sh,
             v_raw_labels: &self.grads.v_raw_labels,
         };
-        self.adam.step(
+        let non_finite = self.adam.step(
             &mut self.splats,
             &grads,
             &lrs,
@@ -449,12 +443,8 @@ impl Trainer {
             Some(&self.grads.visible),
         );
         self.timings.optimizer += t.elapsed().as_secs_f64();
-
-        let t = Instant::now();
-        let bad_param = first_non_finite_param(&self.splats, Some(&self.grads.visible));
-        self.timings.checks += t.elapsed().as_secs_f64();
-        if let Some(what) = bad_param {
-            return self.roll_back(step, started, format!("{what} became non-finite"));
+        if let Some(what) = non_finite {
+            return self.roll_back(step, started, what.to_string());
         }
 
         // Density control.
@@ -477,7 +467,7 @@ impl Trainer {
             // A full scan before every checkpoint: NaN in Gaussians no step looked at (culled,
             // or made by density control) never survives into a checkpoint.
             let t = Instant::now();
-            let bad = first_non_finite_param(&self.splats, None);
+            let bad = first_non_finite_param(&self.splats);
             self.timings.checks += t.elapsed().as_secs_f64();
             if let Some(what) = bad {
                 return self.roll_back(step, started, format!("{what} became non-finite"));
@@ -506,9 +496,7 @@ impl Trainer {
     fn roll_back(&mut self, step: u32, started: Instant, reason: String) -> StepReport {
         let t = Instant::now();
         let mut reason = reason;
-        if first_non_finite_param(&self.splats, None).is_some()
-            || self.adam.len() != self.splats.len()
-        {
+        if first_non_finite_param(&self.splats).is_some() || self.adam.len() != self.splats.len() {
             self.splats.clone_from(&self.checkpoint.splats);
             self.adam.clone_from(&self.checkpoint.adam);
             self.densifier.clone_from(&self.checkpoint.densifier);
