@@ -333,6 +333,40 @@ fn detached_sh_direction_changes_only_means() {
 }
 
 #[test]
+fn backward_overwrites_the_previous_gradients() {
+    let splats = scene(5, 40);
+    let w = weights(5);
+    let fresh = analytic(&splats, &w, &settings());
+    // Culled Gaussians included: move a few behind the camera so no pixel uses them.
+    let mut partly_culled = splats.clone();
+    for m in partly_culled.means.iter_mut().step_by(5) {
+        m.z -= 10.0;
+    }
+    let mut raster = Rasterizer::new();
+    let mut out = RenderOutput::default();
+    let v = PixelGrads {
+        color: &w.color,
+        alpha: Some(&w.alpha),
+        depth: Some(&w.depth),
+        labels: Some(&w.labels),
+    };
+    let mut grads = SplatGrads::zeros(&splats);
+    raster.forward(&partly_culled, &camera(), &settings(), &mut out);
+    raster.backward_pixels(&partly_culled, &camera(), &settings(), &v, &mut grads);
+    // A second frame into the same, now stale, gradients.
+    raster.forward(&splats, &camera(), &settings(), &mut out);
+    raster.backward_pixels(&splats, &camera(), &settings(), &v, &mut grads);
+    assert_eq!(grads.v_means, fresh.v_means);
+    assert_eq!(grads.v_log_scales, fresh.v_log_scales);
+    assert_eq!(grads.v_rotations, fresh.v_rotations);
+    assert_eq!(grads.v_raw_opacities, fresh.v_raw_opacities);
+    assert_eq!(grads.v_sh, fresh.v_sh);
+    assert_eq!(grads.v_raw_labels, fresh.v_raw_labels);
+    assert_eq!(grads.v_means2d_norm, fresh.v_means2d_norm);
+    assert_eq!(grads.visible, fresh.visible);
+}
+
+#[test]
 fn no_gaussians_render_the_background() {
     let splats = Splats::empty(3, LABELS);
     let mut raster = Rasterizer::new();

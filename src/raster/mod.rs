@@ -327,8 +327,9 @@ impl Rasterizer {
         &self.timings
     }
 
-    /// Backward of the last forward (same splats, camera and settings). Gradients are ADDED
-    /// into `grads` (the caller zeroes them); `grads.visible` is overwritten.
+    /// Backward of the last forward (same splats, camera and settings). Every gradient in
+    /// `grads` is overwritten (resized to `splats` first when it does not fit), as is
+    /// `grads.visible`.
     #[allow(clippy::too_many_arguments)]
     pub fn backward(
         &mut self,
@@ -366,7 +367,10 @@ impl Rasterizer {
         );
         let pixels = (self.width * self.height) as usize;
         assert_eq!(v_out.color.len(), pixels * 3, "v_color has the wrong size");
-        if grads.v_means.len() != n || grads.v_sh.len() != splats.sh.len() {
+        if grads.v_means.len() != n
+            || grads.v_sh.len() != splats.sh.len()
+            || grads.v_raw_labels.len() != splats.raw_labels.len()
+        {
             grads.reset(splats);
         }
         let frame = CameraFrame::new(camera);

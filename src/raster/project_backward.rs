@@ -194,9 +194,9 @@ struct ChunkGrads<'a> {
     visible: &'a mut [bool],
 }
 
-/// Adds the gradients of the visible Gaussians `first..first + out.v_means.len()`, 8 at a
-/// time: the geometry of a group as one branch-free loop over its lanes (vectorised), then the
-/// SH per lane and the masked adds. Missing lanes of the last group repeat its last Gaussian
+/// Adds the gradients of the visible Gaussians `first..first + out.v_means.len()` into the
+/// zeroed `out`, 8 at a time: the geometry of a group as one branch-free loop over its lanes
+/// (vectorised), then the SH per lane and the masked adds. Missing lanes of the last group repeat its last Gaussian
 /// and are dropped, so each Gaussian's bits do not depend on the chunking.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -277,7 +277,7 @@ simd_dispatch!(
     )
 );
 
-/// Adds the parameter gradients of every visible Gaussian into `grads`.
+/// Writes the parameter gradients of every Gaussian into `grads` (zero where no pixel used it).
 pub(crate) fn project_backward(
     splats: &Splats,
     frame: &CameraFrame,
@@ -304,6 +304,14 @@ pub(crate) fn project_backward(
                 chunk,
                 (v_means, v_log_scales, v_rotations, v_raw_opacities, v_sh, v_norm, visible),
             )| {
+                // Zeroed here, chunk by chunk while it is in cache, rather than by the caller
+                // in one pass over every gradient array before the backward.
+                v_means.fill(Vec3::ZERO);
+                v_log_scales.fill(Vec3::ZERO);
+                v_rotations.fill(Vec4::ZERO);
+                v_raw_opacities.fill(0.0);
+                v_sh.fill(0.0);
+                v_norm.fill(0.0);
                 let mut out = ChunkGrads {
                     v_means,
                     v_log_scales,
@@ -323,7 +331,7 @@ pub(crate) fn project_backward(
     if l > 0 {
         for (i, v) in grads.v_raw_labels.iter_mut().enumerate() {
             let p = projected.labels[i];
-            *v += screen.v_labels[i] * p * (1.0 - p);
+            *v = screen.v_labels[i] * p * (1.0 - p);
         }
     }
 }

@@ -408,7 +408,6 @@ impl Trainer {
 
         // Backward.
         let t = Instant::now();
-        self.grads.reset(&self.splats);
         self.rasterizer.backward(
             &self.splats,
             &view.camera,
