@@ -110,6 +110,9 @@ pub struct Projected {
     pub radii: Vec<u32>,
     /// `max(SH(dir) + 0.5, 0)`.
     pub colors: Vec<Vec3>,
+    /// Bit `c` set where channel `c` passed that clamp (`SH + 0.5 >= 0`): its gradient flows
+    /// back to the SH only there. Kept so the backward need not sum the SH a second time.
+    pub color_pass: Vec<u8>,
     /// `sigmoid(raw_opacity)`.
     pub opacities: Vec<f32>,
     /// `sigmoid(raw_labels)`, `[g * label_channels + k]`.

@@ -265,6 +265,7 @@ struct ChunkOut<'a> {
     depths: &'a mut [f32],
     radii: &'a mut [u32],
     colors: &'a mut [Vec3],
+    color_pass: &'a mut [u8],
     opacities: &'a mut [f32],
     extents: &'a mut [Vec2],
 }
@@ -309,7 +310,11 @@ fn project_chunk_impl(
             out.conics[j] = Vec3::new(p.conic[0].0[i], p.conic[1].0[i], p.conic[2].0[i]);
             out.depths[j] = p.depth.0[i];
             out.radii[j] = p.radius.0[i] as u32;
-            out.colors[j] = (raw + Vec3::splat(0.5)).max(Vec3::ZERO);
+            let shifted = raw + Vec3::splat(0.5);
+            out.colors[j] = shifted.max(Vec3::ZERO);
+            out.color_pass[j] = (shifted.x >= 0.0) as u8
+                | ((shifted.y >= 0.0) as u8) << 1
+                | ((shifted.z >= 0.0) as u8) << 2;
             out.opacities[j] = p.opacity.0[i];
             out.extents[j] = Vec2::new(p.extent[0].0[i], p.extent[1].0[i]);
         }
@@ -347,6 +352,7 @@ pub(crate) fn project(
     resize(&mut out.depths, n);
     resize(&mut out.radii, n);
     resize(&mut out.colors, n);
+    resize(&mut out.color_pass, n);
     resize(&mut out.opacities, n);
     resize(&mut out.extents, n);
     resize(&mut out.labels, n * l);
@@ -357,19 +363,21 @@ pub(crate) fn project(
         out.depths.par_chunks_mut(CHUNK),
         out.radii.par_chunks_mut(CHUNK),
         out.colors.par_chunks_mut(CHUNK),
+        out.color_pass.par_chunks_mut(CHUNK),
         out.opacities.par_chunks_mut(CHUNK),
         out.extents.par_chunks_mut(CHUNK),
     )
         .into_par_iter()
         .enumerate()
         .for_each(
-            |(chunk, (means2d, conics, depths, radii, colors, opacities, extents))| {
+            |(chunk, (means2d, conics, depths, radii, colors, color_pass, opacities, extents))| {
                 let mut chunk_out = ChunkOut {
                     means2d,
                     conics,
                     depths,
                     radii,
                     colors,
+                    color_pass,
                     opacities,
                     extents,
                 };

@@ -10,7 +10,7 @@ use super::project::{GaussianLanes, M3, camera_space, dot3, world_to_camera_rows
 use super::{CameraFrame, Projected, RenderSettings, ScreenGrads, SplatGrads};
 use crate::simd::simd_dispatch;
 use crate::splats::Splats;
-use crate::splats::sh::{eval_sh_backward_from_basis, eval_sh_from_basis, sh_basis};
+use crate::splats::sh::{eval_sh_backward_from_basis, sh_basis};
 
 const CHUNK: usize = 1024;
 
@@ -241,13 +241,9 @@ fn backward_chunk_impl(
             let coeffs = &splats.sh[g * k..(g + 1) * k];
             let mut basis = [0.0f32; 16];
             sh_basis(sh_degree, dir, &mut basis);
-            let raw = eval_sh_from_basis(sh_degree, &basis, coeffs);
-            let pass = |r: f32, v: f32| if r + 0.5 >= 0.0 { v } else { 0.0 };
-            let v_raw = Vec3::new(
-                pass(raw.x, v_color.x),
-                pass(raw.y, v_color.y),
-                pass(raw.z, v_color.z),
-            );
+            let color_pass = projected.color_pass[g];
+            let pass = |c: u8, v: f32| if color_pass & (1 << c) != 0 { v } else { 0.0 };
+            let v_raw = Vec3::new(pass(0, v_color.x), pass(1, v_color.y), pass(2, v_color.z));
             let v_sh = &mut out.v_sh[j * k..(j + 1) * k];
             let v_dir = eval_sh_backward_from_basis(sh_degree, &basis, coeffs, dir, v_raw, v_sh);
             if settings.sh_direction_grad {

@@ -103,7 +103,7 @@ pub fn eval_sh(degree: u32, coeffs: &[f32], dir: Vec3) -> Vec3 {
     eval_sh_from_basis(degree, &basis, coeffs)
 }
 
-/// [`eval_sh`] from basis values `sh_basis` already wrote (the backward needs them twice).
+/// [`eval_sh`] from basis values `sh_basis` already wrote.
 // `inline(always)` here and below: the projection calls these from its AVX-compiled kernels,
 // and an out-of-line copy would be compiled for the baseline CPU.
 #[inline(always)]
