@@ -281,8 +281,9 @@ fn adam_run(p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32], u: &Update) 
 /// [`adam_run`] where only values with `keep` set change: every lane computes the update and a
 /// select keeps or drops it, so the loop stays one vector loop (a branch per Gaussian would
 /// leave 1–4 values between branches, all scalar square roots and divisions). The kept lanes
-/// get the same bits as `adam_run`. Only kept lanes' gradients are checked: a dropped lane's
-/// gradient changes nothing, so a reported gradient is always one that damaged its parameter.
+/// get the same bits as `adam_run`. Only kept lanes are checked: a dropped lane's gradient
+/// changes nothing and its parameter is not written, so a reported gradient is always one that
+/// damaged its parameter.
 #[inline(always)]
 fn adam_run_masked(
     p: &mut [f32],
@@ -308,7 +309,7 @@ fn adam_run_masked(
         *m = if k { m_new } else { *m };
         *v = if k { v_new } else { *v };
         *p = if k { p_new } else { *p };
-        check.see(if k { g } else { 0.0 }, *p);
+        check.see(if k { g } else { 0.0 }, if k { *p } else { 0.0 });
     }
     check
 }
