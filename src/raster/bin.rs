@@ -21,9 +21,7 @@ pub fn tile_grid(width: u32, height: u32) -> (u32, u32) {
 /// skipped by the alpha threshold, or blend only into the edge tiles' pixels beyond the image.
 #[inline(always)]
 pub fn tile_rect(mean2d: Vec2, radius: u32, extent: Vec2, width: u32, height: u32) -> [u32; 4] {
-    if radius == 0 || !(extent.x > 0.0) || !(extent.y > 0.0) || width == 0 || height == 0 {
-        return [0, 0, 0, 0];
-    }
+    // Branch-free, so that the binning's loop over every Gaussian vectorises.
     let (tiles_x, tiles_y) = tile_grid(width, height);
     let ts = TILE_SIZE as f32;
     let r = radius as f32;
@@ -35,23 +33,34 @@ pub fn tile_rect(mean2d: Vec2, radius: u32, extent: Vec2, width: u32, height: u3
     let gy1 = clamp(((mean2d.y + r) / ts).ceil(), tiles_y);
     // Pixels p of the image whose centres p + 0.5 lie within extent of the mean.
     let px0 = (mean2d.x - extent.x - 0.5).ceil().max(0.0);
-    let px1 = (mean2d.x + extent.x - 0.5).floor().min((width - 1) as f32);
+    let px1 = (mean2d.x + extent.x - 0.5)
+        .floor()
+        .min(width.saturating_sub(1) as f32);
     let py0 = (mean2d.y - extent.y - 0.5).ceil().max(0.0);
-    let py1 = (mean2d.y + extent.y - 0.5).floor().min((height - 1) as f32);
-    // `!(<=)` also drops NaN.
-    if !(px0 <= px1) || !(py0 <= py1) {
-        return [0, 0, 0, 0];
-    }
+    let py1 = (mean2d.y + extent.y - 0.5)
+        .floor()
+        .min(height.saturating_sub(1) as f32);
     let ex0 = clamp((px0 / ts).floor(), tiles_x);
     let ex1 = clamp((px1 / ts).floor() + 1.0, tiles_x);
     let ey0 = clamp((py0 / ts).floor(), tiles_y);
     let ey1 = clamp((py1 / ts).floor() + 1.0, tiles_y);
     let (x0, x1) = (gx0.max(ex0), gx1.min(ex1));
     let (y0, y1) = (gy0.max(ey0), gy1.min(ey1));
-    if x0 >= x1 || y0 >= y1 {
-        return [0, 0, 0, 0];
+    // `<=` is false for NaN, which drops it.
+    let binned = (radius != 0)
+        & (extent.x > 0.0)
+        & (extent.y > 0.0)
+        & (width != 0)
+        & (height != 0)
+        & (px0 <= px1)
+        & (py0 <= py1)
+        & (x0 < x1)
+        & (y0 < y1);
+    if binned {
+        [x0, y0, x1, y1]
+    } else {
+        [0, 0, 0, 0]
     }
-    [x0, y0, x1, y1]
 }
 
 /// Sorts `depth bits << 32 | index` keys whose indices ascend, by depth then index: a stable
@@ -162,16 +171,20 @@ impl TileBins {
         self.depth_keys.clear();
         self.cursor.clear();
         self.cursor.resize(tiles, 0);
+        // Every rectangle first, in one loop without branches (it vectorises), then the keys
+        // and counts of the binned Gaussians.
+        for (((rect, &mean2d), &radius), &extent) in self
+            .rects
+            .iter_mut()
+            .zip(&projected.means2d)
+            .zip(&projected.radii)
+            .zip(&projected.extents)
+        {
+            *rect = tile_rect(mean2d, radius, extent, width, height);
+        }
         for g in 0..n {
-            let rect = tile_rect(
-                projected.means2d[g],
-                projected.radii[g],
-                projected.extents[g],
-                width,
-                height,
-            );
+            let rect = self.rects[g];
             if rect[2] > rect[0] {
-                self.rects[g] = rect;
                 // Depths are > NEAR_PLANE > 0, so their bit patterns sort like the values;
                 // the index breaks ties deterministically.
                 let key = ((projected.depths[g].to_bits() as u64) << 32) | g as u64;
