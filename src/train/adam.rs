@@ -398,6 +398,99 @@ simd_dispatch!(
     ) -> FiniteCheck
 );
 
+/// One rayon task of [`update_sh_groups`]: Gaussians `first..first + p.len() / k3`, their DC
+/// values (`dc`) then their higher bands (`rest`) one record at a time.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn update_sh_chunk_impl(
+    p: &mut [f32],
+    g: &[f32],
+    dc: (&mut [f32], &mut [f32]),
+    rest: (&mut [f32], &mut [f32]),
+    first: usize,
+    k3: usize,
+    u_dc: &Update,
+    u_rest: &Update,
+) -> [FiniteCheck; 2] {
+    let count = p.len() / k3;
+    let r = k3 - 3;
+    let (m_dc, v_dc) = dc;
+    let (m_rest, v_rest) = rest;
+    let mut checks = [FiniteCheck::default(); 2];
+    for i in 0..count {
+        // Frozen and visible flags are the same for both groups.
+        if u_dc.frozen[first + i] || u_dc.visible.is_some_and(|vis| !vis[first + i]) {
+            continue;
+        }
+        let (p_dc, p_rest) = p[i * k3..(i + 1) * k3].split_at_mut(3);
+        let (g_dc, g_rest) = g[i * k3..(i + 1) * k3].split_at(3);
+        checks[0] = checks[0].merge(adam_run(
+            p_dc,
+            g_dc,
+            &mut m_dc[i * 3..(i + 1) * 3],
+            &mut v_dc[i * 3..(i + 1) * 3],
+            u_dc,
+        ));
+        checks[1] = checks[1].merge(adam_run(
+            p_rest,
+            g_rest,
+            &mut m_rest[i * r..(i + 1) * r],
+            &mut v_rest[i * r..(i + 1) * r],
+            u_rest,
+        ));
+    }
+    checks
+}
+
+simd_dispatch!(
+    /// [`update_sh_chunk_impl`] with AVX2 (or AVX-512VL) where the CPU has it.
+    update_sh_chunk => update_sh_chunk_impl(
+        p: &mut [f32],
+        g: &[f32],
+        dc: (&mut [f32], &mut [f32]),
+        rest: (&mut [f32], &mut [f32]),
+        first: usize,
+        k3: usize,
+        u_dc: &Update,
+        u_rest: &Update,
+    ) -> [FiniteCheck; 2]
+);
+
+/// Both SH groups in one pass over the SH records (`k3` values per Gaussian: DC first), so each
+/// record and its gradient are read once instead of once per group. The same values, in the
+/// same order, as two [`update_group`] calls.
+fn update_sh_groups(
+    params: &mut [f32],
+    grads: &[f32],
+    (dc, rest): (&mut Moments, &mut Moments),
+    k3: usize,
+    u_dc: Update,
+    u_rest: Update,
+) -> [FiniteCheck; 2] {
+    let chunk = GAUSSIANS_PER_TASK;
+    let r = k3 - 3;
+    params
+        .par_chunks_mut(k3 * chunk)
+        .zip(grads.par_chunks(k3 * chunk))
+        .zip(
+            dc.m.par_chunks_mut(3 * chunk)
+                .zip(dc.v.par_chunks_mut(3 * chunk)),
+        )
+        .zip(
+            rest.m
+                .par_chunks_mut(r * chunk)
+                .zip(rest.v.par_chunks_mut(r * chunk)),
+        )
+        .enumerate()
+        .map(|(t, (((p, g), dc), rest))| {
+            update_sh_chunk(p, g, dc, rest, t * chunk, k3, &u_dc, &u_rest)
+        })
+        .reduce(
+            || [FiniteCheck::default(); 2],
+            |a, b| [a[0].merge(b[0]), a[1].merge(b[1])],
+        )
+}
+
 /// Updates one group stored with `stride` values per Gaussian of which `offset..offset+len`
 /// belong to the group (`len == m.per_gaussian`); `grads` has the parameters' layout.
 fn update_group(
@@ -488,24 +581,52 @@ impl Adam {
             assert_eq!(v.len(), n, "visibility length");
         }
         let mut found = None;
+        let (beta1, beta2, eps) = (self.beta1, self.beta2, self.eps);
+        let update = |mom: &mut Moments, lr: f32, frozen| {
+            mom.step += 1;
+            let t = mom.step as i32;
+            Update {
+                lr,
+                beta1,
+                beta2,
+                eps,
+                bias1: 1.0 - beta1.powi(t),
+                bias2_sqrt: (1.0 - beta2.powi(t)).sqrt(),
+                frozen,
+                visible,
+            }
+        };
+        let (dc, rest) = (ParamGroup::ShDc.index(), ParamGroup::ShRest.index());
+        let fuse_sh = groups.0[dc] && groups.0[rest] && k3 > 3;
         for group in ParamGroup::ALL {
             let gi = group.index();
-            if !groups.0[gi] {
+            if !groups.0[gi] || (fuse_sh && group == ParamGroup::ShRest) {
+                continue;
+            }
+            if fuse_sh && group == ParamGroup::ShDc {
+                let (head, tail) = self.groups.split_at_mut(rest);
+                let u_dc = update(&mut head[dc], lrs[dc], &splats.meta.frozen);
+                let u_rest = update(&mut tail[0], lrs[rest], &splats.meta.frozen);
+                let checks = update_sh_groups(
+                    &mut splats.sh,
+                    grads.v_sh,
+                    (&mut head[dc], &mut tail[0]),
+                    k3,
+                    u_dc,
+                    u_rest,
+                );
+                for (check, group) in checks
+                    .into_iter()
+                    .zip([ParamGroup::ShDc, ParamGroup::ShRest])
+                {
+                    if found.is_none() {
+                        found = check.verdict(group);
+                    }
+                }
                 continue;
             }
             let mom = &mut self.groups[gi];
-            mom.step += 1;
-            let t = mom.step as i32;
-            let u = Update {
-                lr: lrs[gi],
-                beta1: self.beta1,
-                beta2: self.beta2,
-                eps: self.eps,
-                bias1: 1.0 - self.beta1.powi(t),
-                bias2_sqrt: (1.0 - self.beta2.powi(t)).sqrt(),
-                frozen: &splats.meta.frozen,
-                visible,
-            };
+            let u = update(mom, lrs[gi], &splats.meta.frozen);
             let check = match group {
                 ParamGroup::Means => {
                     let p: &mut [f32] = bytemuck::cast_slice_mut(&mut splats.means);

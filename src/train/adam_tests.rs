@@ -214,3 +214,38 @@ fn a_step_reports_the_first_non_finite_value_it_applied_or_wrote() {
     assert_eq!(found, None);
     assert!(s.raw_opacities.iter().all(|v| v.is_finite()));
 }
+
+#[test]
+fn both_sh_groups_in_one_pass_match_one_group_at_a_time() {
+    let mut together = model(5);
+    together.meta.frozen[1] = true;
+    let mut apart = together.clone();
+    let mut grads = Grads::constant(&together, 0.0);
+    for (i, g) in grads.sh.iter_mut().enumerate() {
+        *g = ((i * 37 % 11) as f32 - 5.0) * 1e-2;
+    }
+    let visible = [true, true, false, true, true];
+    let lrs = [0.01, 0.02, 0.03, 0.04, 0.05, 0.006, 0.07];
+    let mut sh_only = GroupFlags::ALL_OFF;
+    sh_only.set(ParamGroup::ShDc, true);
+    sh_only.set(ParamGroup::ShRest, true);
+    let mut adam_together = Adam::new(&together);
+    let mut adam_apart = Adam::new(&apart);
+    for _ in 0..3 {
+        let found =
+            adam_together.step(&mut together, &grads.view(), &lrs, &sh_only, Some(&visible));
+        assert_eq!(found, None);
+        for group in [ParamGroup::ShDc, ParamGroup::ShRest] {
+            let mut one = GroupFlags::ALL_OFF;
+            one.set(group, true);
+            let found = adam_apart.step(&mut apart, &grads.view(), &lrs, &one, Some(&visible));
+            assert_eq!(found, None);
+        }
+    }
+    assert_eq!(together.sh, apart.sh);
+    assert_eq!(adam_together, adam_apart);
+    assert_ne!(together.sh, model(5).sh);
+    // The frozen and the invisible Gaussian kept their coefficients.
+    let k3 = together.sh_coeffs() * 3;
+    assert_eq!(together.sh[k3..3 * k3], model(5).sh[k3..3 * k3]);
+}
