@@ -11,7 +11,7 @@ use super::forward::{
     CENTRES, CH_DEPTH, CH_LABELS, CH_RGB, CH_T, LANES, Splat2d, lane_offsets, replay_falloff,
     start_transmittance, state_channels,
 };
-use super::segments::SegmentStore;
+use super::segments::{SegmentStore, resize_for_overwrite};
 use super::{
     MAX_LABEL_CHANNELS, PixelGrads, Projected, RenderSettings, ScreenGrads, TILE_PIXELS, TILE_SIZE,
     TRANSMITTANCE_MIN,
@@ -124,11 +124,12 @@ fn backward_tile_impl<F: MulAdd, const HAS_LABELS: bool>(
     debug_assert_eq!(masks.len(), (end - start) as usize);
     let mut vis_pos = 0;
     for (n, &mask) in masks.iter().enumerate() {
+        let isect_out = &mut out[n * stride..(n + 1) * stride];
         if mask == 0 {
-            // Blended nowhere in the forward: its gradient slots stay zero.
+            // Blended nowhere in the forward: no gradient.
+            isect_out.fill(0.0);
             continue;
         }
-        let isect_out = &mut out[n * stride..(n + 1) * stride];
         let sp = splats[n];
         let label_values = &isect_labels[n * labels..(n + 1) * labels];
         let lane_dx = lane_offsets(&sp, ox);
@@ -324,8 +325,8 @@ pub(crate) fn rasterize_backward(
 ) {
     let stride = grad_stride(labels);
     let n_isects = bins.gaussian_ids.len();
-    isect_grads.clear();
-    isect_grads.resize(n_isects * stride, 0.0);
+    // Not cleared: `backward_tile` writes every slot of every intersection.
+    resize_for_overwrite(isect_grads, n_isects * stride);
     let slices = bins.split_by_tile(isect_grads, stride);
     let state_stride = state_channels(labels) * TILE_PIXELS;
     let (w, h) = (width as usize, height as usize);

@@ -61,11 +61,10 @@ impl SegmentStore {
             .zip(projected.opacities.par_iter())
             .for_each(|(p, &opacity)| *p = power_limit(opacity, alpha_threshold));
         let power_max = &self.power_max;
-        self.masks.clear();
-        self.masks.resize(bins.gaussian_ids.len(), 0);
-        self.splats.clear();
-        self.splats
-            .resize(bins.gaussian_ids.len(), Splat2d::default());
+        // Not cleared: the tile loop below writes every entry, and zeroing first cost a pass
+        // over a few megabytes per frame.
+        resize_for_overwrite(&mut self.masks, bins.gaussian_ids.len());
+        resize_for_overwrite(&mut self.splats, bins.gaussian_ids.len());
         self.counts.clear();
         self.counts.resize(tiles, 0);
         bins.split_by_tile(&mut self.masks, 1)
@@ -131,6 +130,16 @@ impl SegmentStore {
     /// A tile's falloffs as the forward wrote them.
     pub fn tile_vis(&self, tile: usize) -> &[f32] {
         &self.vis[self.offsets[tile]..self.offsets[tile + 1]]
+    }
+}
+
+/// Sets `v`'s length to `len` for a caller that overwrites every entry: old values stay (only
+/// new room is filled with defaults), so nothing is written twice.
+pub(crate) fn resize_for_overwrite<T: Copy + Default>(v: &mut Vec<T>, len: usize) {
+    if v.len() < len {
+        v.resize(len, T::default());
+    } else {
+        v.truncate(len);
     }
 }
 
