@@ -5,9 +5,9 @@
 use glam::Vec2;
 
 use super::{Projected, TILE_SIZE};
+use crate::simd::simd_dispatch;
 
 const TS: usize = TILE_SIZE as usize;
-use crate::simd::simd_dispatch;
 
 /// Tiles covering a `width × height` image: `(tiles_x, tiles_y)`; tile id = `ty * tiles_x + tx`.
 pub fn tile_grid(width: u32, height: u32) -> (u32, u32) {
