@@ -252,6 +252,41 @@ fn vblur_row<F: MulAdd>(
     }
 }
 
+/// Horizontal pass of row `y` of every map, `width` values wide: `padded` holds one padded
+/// row per map, `rings` one ring of `SSIM_WINDOW` rows per map; row `y` goes to slot
+/// `y % SSIM_WINDOW`.
+#[inline(always)]
+fn hblur_into_ring<F: MulAdd>(
+    kernel: &[f32; SSIM_WINDOW],
+    padded: &[f32],
+    width: usize,
+    y: usize,
+    rings: &mut [f32],
+) {
+    let slot = (y % SSIM_WINDOW) * width;
+    let padded_rows = padded.chunks_exact(width + 2 * RADIUS);
+    for (src, ring) in padded_rows.zip(rings.chunks_exact_mut(SSIM_WINDOW * width)) {
+        hblur_row::<F>(kernel, src, &mut ring[slot..slot + width]);
+    }
+}
+
+/// Vertical pass of row `y` (of `height`) of every map, `width` values wide, from their rings
+/// (`SSIM_WINDOW` rows each) into `out` (one row per map).
+#[inline(always)]
+fn vblur_from_ring<F: MulAdd>(
+    kernel: &[f32; SSIM_WINDOW],
+    rings: &[f32],
+    width: usize,
+    y: usize,
+    height: usize,
+    out: &mut [f32],
+) {
+    let rows = out.chunks_exact_mut(width);
+    for (ring, row) in rings.chunks_exact(SSIM_WINDOW * width).zip(rows) {
+        vblur_row::<F>(kernel, ring, y, height, row);
+    }
+}
+
 /// One row of step 3: the SSIM of each pixel from its blurred statistics (`stats[j]` is
 /// map `j`'s row), its weighted sum, and (when `grads` is given) the weighted partials w.r.t.
 /// the three means the SSIM depends on through x, written into the padded rows' interiors.
@@ -345,7 +380,6 @@ fn band_impl<F: MulAdd>(
         (y0, y1)
     };
     let (in_lo, in_hi) = (st_lo.saturating_sub(RADIUS), h.min(st_hi + RADIUS));
-    let ring = SSIM_WINDOW * w;
     for c in 0..3 {
         let mut next_st = st_lo;
         let mut next_out = y0;
@@ -371,21 +405,13 @@ fn band_impl<F: MulAdd>(
                     pxy[p] = a * b;
                 }
             }
-            let slot = (yi % SSIM_WINDOW) * w;
-            for j in 0..FWD {
-                let src = &s.fwd_padded[j * pw..(j + 1) * pw];
-                let out = &mut s.fwd_ring[j * ring + slot..j * ring + slot + w];
-                hblur_row::<F>(&f.kernel, src, out);
-            }
+            hblur_into_ring::<F>(&f.kernel, &s.fwd_padded, w, yi, &mut s.fwd_ring);
             // 2. Every SSIM row whose window the ring now holds.
             let last_in = yi + 1 == in_hi;
             while next_st < st_hi && (next_st + RADIUS <= yi || last_in) {
                 let ys = next_st;
                 next_st += 1;
-                for j in 0..FWD {
-                    let src = &s.fwd_ring[j * ring..(j + 1) * ring];
-                    vblur_row::<F>(&f.kernel, src, ys, h, &mut s.stats[j * w..(j + 1) * w]);
-                }
+                vblur_from_ring::<F>(&f.kernel, &s.fwd_ring, w, ys, h, &mut s.stats);
                 // 3. Its SSIM and weighted partials.
                 let stats: [&[f32]; FWD] = [
                     &s.stats[..w],
@@ -417,21 +443,12 @@ fn band_impl<F: MulAdd>(
                 // 4. The partials' horizontal blurs into the second ring, then every gradient
                 // row whose window it now holds: the adjoint of the blur (the same blur: the
                 // window is symmetric), then through the products x, x², x·y.
-                let slot = (ys % SSIM_WINDOW) * w;
-                for j in 0..BWD {
-                    let src = &s.bwd_padded[j * pw..(j + 1) * pw];
-                    let out = &mut s.bwd_ring[j * ring + slot..j * ring + slot + w];
-                    hblur_row::<F>(&f.kernel, src, out);
-                }
+                hblur_into_ring::<F>(&f.kernel, &s.bwd_padded, w, ys, &mut s.bwd_ring);
                 let last_st = ys + 1 == st_hi;
                 while next_out < y1 && (next_out + RADIUS <= ys || last_st) {
                     let yo = next_out;
                     next_out += 1;
-                    for j in 0..BWD {
-                        let src = &s.bwd_ring[j * ring..(j + 1) * ring];
-                        let out = &mut s.bwd_rows[j * w..(j + 1) * w];
-                        vblur_row::<F>(&f.kernel, src, yo, h, out);
-                    }
+                    vblur_from_ring::<F>(&f.kernel, &s.bwd_ring, w, yo, h, &mut s.bwd_rows);
                     let (b0, rest) = s.bwd_rows.split_at(w);
                     let (b1, b2) = rest.split_at(w);
                     let at = yo * w * 3;
