@@ -11,7 +11,7 @@ pub mod metrics;
 pub mod raster;
 pub mod report;
 pub mod scene;
-mod simd;
+pub mod simd;
 pub mod splats;
 pub mod synth;
 pub mod train;

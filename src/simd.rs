@@ -1,4 +1,92 @@
 //! Runtime CPU-feature dispatch shared by the CPU hot loops (rasterizer, SSIM, Adam).
+//!
+//! The build a kernel runs is the best the CPU has, or a lower one named in the
+//! `DAMAGE_TWIN_SIMD` environment variable (`avx512`, `avx2` or `baseline`), read once per
+//! process. The lower builds are what machines without AVX-512 or AVX2 run; the variable lets
+//! the tests check them and the benchmarks time them on any machine.
+
+use std::sync::OnceLock;
+
+/// The environment variable that caps the SIMD build (see the module docs).
+pub const SIMD_ENV: &str = "DAMAGE_TWIN_SIMD";
+
+/// A build of the dispatched kernels, lowest first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum SimdLevel {
+    /// The target's baseline (SSE2 on x86-64): 4-lane vectors, separate multiply and add.
+    Baseline,
+    /// AVX2 with FMA and POPCNT: 8-lane vectors, fused multiply-adds.
+    Avx2,
+    /// The AVX2 code with AVX-512F/VL encodings: 32 vector registers and mask registers.
+    Avx512,
+}
+
+impl SimdLevel {
+    /// The name `DAMAGE_TWIN_SIMD` takes for this build.
+    pub fn name(self) -> &'static str {
+        match self {
+            SimdLevel::Baseline => "baseline",
+            SimdLevel::Avx2 => "avx2",
+            SimdLevel::Avx512 => "avx512",
+        }
+    }
+
+    /// Reads a build's name (case-insensitive); `None` for anything else.
+    pub fn parse(name: &str) -> Option<SimdLevel> {
+        [SimdLevel::Baseline, SimdLevel::Avx2, SimdLevel::Avx512]
+            .into_iter()
+            .find(|level| level.name().eq_ignore_ascii_case(name.trim()))
+    }
+
+    /// The best build this CPU can run.
+    pub fn detected() -> SimdLevel {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let avx2_fma = std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+                && std::arch::is_x86_feature_detected!("popcnt");
+            if avx2_fma
+                && std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx512vl")
+            {
+                return SimdLevel::Avx512;
+            }
+            if avx2_fma {
+                return SimdLevel::Avx2;
+            }
+        }
+        SimdLevel::Baseline
+    }
+}
+
+/// The build the dispatched kernels run in this process: [`SimdLevel::detected`], capped by
+/// `DAMAGE_TWIN_SIMD` when it names a build. Never above what the CPU has, which is what
+/// makes the dispatch's `unsafe` calls sound.
+pub fn simd_level() -> SimdLevel {
+    static LEVEL: OnceLock<SimdLevel> = OnceLock::new();
+    *LEVEL.get_or_init(|| {
+        let requested = std::env::var(SIMD_ENV).ok();
+        level_for(SimdLevel::detected(), requested.as_deref())
+    })
+}
+
+/// The build to run on a CPU that has `detected`, given the variable's value.
+fn level_for(detected: SimdLevel, requested: Option<&str>) -> SimdLevel {
+    let Some(requested) = requested.filter(|value| !value.trim().is_empty()) else {
+        return detected;
+    };
+    match SimdLevel::parse(requested) {
+        Some(level) => level.min(detected),
+        None => {
+            tracing::warn!(
+                "{SIMD_ENV}={requested:?} names no SIMD build (avx512, avx2, baseline); \
+                 using {}",
+                detected.name()
+            );
+            detected
+        }
+    }
+}
 
 /// How a kernel computes `a · b + c`: kernels generic over it are built with [`Fused`] (one
 /// rounding, one instruction) in the AVX builds and with [`Separate`] (two roundings) in the
@@ -31,8 +119,8 @@ impl MulAdd for Separate {
 }
 
 /// Defines `$name`, which runs the `#[inline(always)]` kernel `$kernel` compiled for AVX-512VL
-/// or else AVX2 (both with FMA and POPCNT) when the CPU has it (8-lane vectors instead of baseline SSE2's
-/// 4), and the baseline build otherwise. Kernels that add in a fixed order and use no FMA give
+/// or else AVX2 (both with FMA and POPCNT) as [`simd_level`] says (8-lane vectors instead of
+/// baseline SSE2's 4), and the baseline build otherwise. Kernels that add in a fixed order and use no FMA give
 /// the same bits on every path. A kernel written `$kernel::<MulAdd>` is generic over
 /// [`MulAdd`]: it gets [`Fused`] in the AVX builds and [`Separate`] in the baseline one, so its
 /// bits depend on the CPU (still the same for any thread count on one machine).
@@ -76,20 +164,14 @@ macro_rules! simd_dispatch {
                 fn avx512($($arg: $ty),*) $(-> $ret)? {
                     $($fast)*($($arg),*)
                 }
-                let avx2_fma = std::arch::is_x86_feature_detected!("avx2")
-                    && std::arch::is_x86_feature_detected!("fma")
-                    && std::arch::is_x86_feature_detected!("popcnt");
-                if avx2_fma
-                    && std::arch::is_x86_feature_detected!("avx512f")
-                    && std::arch::is_x86_feature_detected!("avx512vl")
-                {
-                    // SAFETY: the CPU supports AVX2, FMA, POPCNT, AVX-512F and AVX-512VL
-                    // (checked just above), every feature this build enables.
-                    return unsafe { avx512($($arg),*) };
-                }
-                if avx2_fma {
-                    // SAFETY: the CPU supports AVX2, FMA and POPCNT (checked just above).
-                    return unsafe { avx2($($arg),*) };
+                match $crate::simd::simd_level() {
+                    // SAFETY: `simd_level` returns `Avx512` only when the CPU supports AVX2,
+                    // FMA, POPCNT, AVX-512F and AVX-512VL, every feature this build enables.
+                    $crate::simd::SimdLevel::Avx512 => return unsafe { avx512($($arg),*) },
+                    // SAFETY: `simd_level` returns `Avx2` only when the CPU supports AVX2, FMA
+                    // and POPCNT.
+                    $crate::simd::SimdLevel::Avx2 => return unsafe { avx2($($arg),*) },
+                    $crate::simd::SimdLevel::Baseline => {}
                 }
             }
             $($base)*($($arg),*)
@@ -98,3 +180,91 @@ macro_rules! simd_dispatch {
 }
 
 pub(crate) use simd_dispatch;
+
+/// For tests: runs the named tests of the current test binary (full names, as `--exact` takes
+/// them) once per SIMD build below [`SimdLevel::detected`], with `DAMAGE_TWIN_SIMD` set to
+/// that build, and panics with the child's output unless every named test ran and passed. A
+/// test suite checked this way covers the kernels that machines without AVX-512 or AVX2 run.
+#[doc(hidden)]
+pub fn rerun_tests_on_lower_builds(tests: &[&str]) {
+    let exe = std::env::current_exe().expect("the test binary's path");
+    let lower = [SimdLevel::Avx2, SimdLevel::Baseline]
+        .into_iter()
+        .filter(|&level| level < SimdLevel::detected());
+    for level in lower {
+        let output = std::process::Command::new(&exe)
+            .args(tests)
+            .arg("--exact")
+            .env(SIMD_ENV, level.name())
+            .output()
+            .expect("the test binary runs");
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        let all_passed = format!("test result: ok. {} passed", tests.len());
+        assert!(
+            output.status.success() && stdout.contains(&all_passed),
+            "with {SIMD_ENV}={}, expected {all_passed}; got:\n{stdout}\n{}",
+            level.name(),
+            String::from_utf8_lossy(&output.stderr)
+        );
+    }
+}
+
+/// For tests: asserts that [`simd_level`] is the build `DAMAGE_TWIN_SIMD` asks for, capped at
+/// the CPU's, so that a rerun with the variable set really ran the lower build.
+#[doc(hidden)]
+pub fn assert_level_follows_the_environment() {
+    let requested = std::env::var(SIMD_ENV).ok();
+    let expected = match requested.as_deref().and_then(SimdLevel::parse) {
+        Some(level) => level.min(SimdLevel::detected()),
+        None => SimdLevel::detected(),
+    };
+    assert_eq!(simd_level(), expected, "{SIMD_ENV}={requested:?}");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_variable_caps_the_build_and_never_raises_it() {
+        use SimdLevel::*;
+        assert_eq!(level_for(Avx512, None), Avx512);
+        assert_eq!(level_for(Avx512, Some("")), Avx512);
+        assert_eq!(level_for(Avx512, Some("avx2")), Avx2);
+        assert_eq!(level_for(Avx512, Some(" Baseline ")), Baseline);
+        assert_eq!(level_for(Avx2, Some("avx512")), Avx2);
+        assert_eq!(level_for(Baseline, Some("avx2")), Baseline);
+        assert_eq!(level_for(Avx2, Some("sse9")), Avx2);
+    }
+
+    #[test]
+    fn names_round_trip() {
+        for level in [SimdLevel::Baseline, SimdLevel::Avx2, SimdLevel::Avx512] {
+            assert_eq!(SimdLevel::parse(level.name()), Some(level));
+        }
+        assert_eq!(SimdLevel::parse("avx"), None);
+    }
+
+    #[test]
+    fn the_build_follows_the_environment() {
+        assert_level_follows_the_environment();
+    }
+
+    /// The training kernels' own checks (SSIM, losses, Adam) and the rasterizer's unit tests,
+    /// on the builds below this CPU's.
+    #[test]
+    fn kernel_checks_pass_on_the_lower_builds() {
+        rerun_tests_on_lower_builds(&[
+            "simd::tests::the_build_follows_the_environment",
+            "train::ssim::tests::every_band_height_gives_the_same_bits",
+            "train::loss::tests::fast_ssim_matches_the_metric",
+            "train::loss::tests::photometric_gradient_matches_finite_differences",
+            "train::loss::tests::region_gradient_matches_finite_differences_and_is_zero_outside",
+            "train::adam::tests::steps_match_torch_adam",
+            "train::adam::tests::both_sh_groups_in_one_pass_match_one_group_at_a_time",
+            "raster::tests::blend_backward_matches_finite_differences_in_screen_space",
+            "raster::tests::forward_matches_a_per_pixel_loop_on_edge_tiles",
+            "raster::bin::tests::bins_are_sorted_by_tile_then_depth",
+        ]);
+    }
+}

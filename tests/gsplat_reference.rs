@@ -251,3 +251,20 @@ fn tiny_case_gradients_match_gsplat() {
 fn basic_case_gradients_match_gsplat() {
     check_gradients("basic_case.safetensors", &GRAD_TOL);
 }
+
+#[test]
+fn simd_build_follows_the_environment() {
+    damage_twin::simd::assert_level_follows_the_environment();
+}
+
+/// The same checks with the kernels machines without AVX-512 or AVX2 run.
+#[test]
+fn gsplat_checks_pass_on_the_lower_simd_builds() {
+    damage_twin::simd::rerun_tests_on_lower_builds(&[
+        "simd_build_follows_the_environment",
+        "tiny_case_forward_matches_gsplat",
+        "basic_case_forward_matches_gsplat",
+        "tiny_case_gradients_match_gsplat",
+        "basic_case_gradients_match_gsplat",
+    ]);
+}

@@ -494,3 +494,19 @@ fn results_are_identical_for_one_and_two_threads() {
     };
     assert_eq!(run(1), run(2));
 }
+
+#[test]
+fn simd_build_follows_the_environment() {
+    damage_twin::simd::assert_level_follows_the_environment();
+}
+
+/// The same checks with the kernels machines without AVX-512 or AVX2 run.
+#[test]
+fn gradient_checks_pass_on_the_lower_simd_builds() {
+    damage_twin::simd::rerun_tests_on_lower_builds(&[
+        "simd_build_follows_the_environment",
+        "every_gradient_lane_matches_central_finite_differences",
+        "nan_parameters_are_culled_not_propagated",
+        "results_are_identical_for_one_and_two_threads",
+    ]);
+}

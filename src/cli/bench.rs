@@ -33,6 +33,8 @@ struct Bench {
     train_views: usize,
     iterations: u32,
     threads: usize,
+    /// The SIMD build the CPU kernels ran (`DAMAGE_TWIN_SIMD` can lower it).
+    simd: &'static str,
     seconds: f64,
     ms_per_iteration: f64,
     stage_ms_per_iteration: StageTimes,
@@ -91,6 +93,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             train_views,
             iterations: steps,
             threads: rayon::current_num_threads(),
+            simd: damage_twin::simd::simd_level().name(),
             seconds,
             ms_per_iteration: seconds * 1000.0 / steps.max(1) as f64,
             stage_ms_per_iteration: stages,

@@ -124,6 +124,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let diff = image_difference(&gpu_frame.color, &out.color);
         json!({
             "threads": rayon::current_num_threads(),
+            "simd": damage_twin::simd::simd_level().name(),
             "ms_per_frame": {
                 "project": round(project / f),
                 "sort": round(sort / f),

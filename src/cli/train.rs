@@ -188,6 +188,8 @@ struct Metrics {
     width: u32,
     height: u32,
     threads: usize,
+    /// The SIMD build the CPU kernels ran (`DAMAGE_TWIN_SIMD` can lower it).
+    simd: &'static str,
     rolled_back: u32,
     cancelled: bool,
     stage_ms_per_iteration: StageTimes,
@@ -396,6 +398,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         width,
         height,
         threads,
+        simd: damage_twin::simd::simd_level().name(),
         rolled_back: outcome.rolled_back,
         cancelled: outcome.cancelled,
         stage_ms_per_iteration: outcome.timings.per_step_ms(outcome.steps),
