@@ -70,21 +70,35 @@ pub fn simd_level() -> SimdLevel {
     })
 }
 
-/// The build to run on a CPU that has `detected`, given the variable's value.
+/// The build to run on a CPU that has `detected`, given the variable's value: the named build
+/// capped at the CPU's, or the CPU's when the value names none ([`environment_warning`] says so).
 fn level_for(detected: SimdLevel, requested: Option<&str>) -> SimdLevel {
-    let Some(requested) = requested.filter(|value| !value.trim().is_empty()) else {
-        return detected;
-    };
+    requested
+        .and_then(SimdLevel::parse)
+        .map_or(detected, |level| level.min(detected))
+}
+
+/// What is wrong with `DAMAGE_TWIN_SIMD`, if anything: a value that names no build, or a build
+/// this CPU cannot run (it then runs its best). For the clients to show; `None` when unset.
+pub fn environment_warning() -> Option<String> {
+    let requested = std::env::var(SIMD_ENV).ok();
+    warning_for(SimdLevel::detected(), requested.as_deref())
+}
+
+fn warning_for(detected: SimdLevel, requested: Option<&str>) -> Option<String> {
+    let requested = requested?;
     match SimdLevel::parse(requested) {
-        Some(level) => level.min(detected),
-        None => {
-            tracing::warn!(
-                "{SIMD_ENV}={requested:?} names no SIMD build (avx512, avx2, baseline); \
-                 using {}",
-                detected.name()
-            );
-            detected
-        }
+        None if requested.trim().is_empty() => None,
+        None => Some(format!(
+            "{SIMD_ENV}={requested:?} names no SIMD build (avx512, avx2 or baseline); \
+             running {}",
+            detected.name()
+        )),
+        Some(level) if level > detected => Some(format!(
+            "{SIMD_ENV}={requested}, but this CPU runs at most {}; running that",
+            detected.name()
+        )),
+        Some(_) => None,
     }
 }
 
@@ -120,8 +134,8 @@ impl MulAdd for Separate {
 
 /// Defines `$name`, which runs the `#[inline(always)]` kernel `$kernel` compiled for AVX-512VL
 /// or else AVX2 (both with FMA and POPCNT) as [`simd_level`] says (8-lane vectors instead of
-/// baseline SSE2's 4), and the baseline build otherwise. Kernels that add in a fixed order and use no FMA give
-/// the same bits on every path. A kernel written `$kernel::<MulAdd>` is generic over
+/// baseline SSE2's 4), and the baseline build otherwise. Kernels that add in a fixed order and
+/// use no FMA give the same bits on every path. A kernel written `$kernel::<MulAdd>` is generic over
 /// [`MulAdd`]: it gets [`Fused`] in the AVX builds and [`Separate`] in the baseline one, so its
 /// bits depend on the CPU (still the same for any thread count on one machine).
 /// Attributes and doc comments before `$name` are kept.
@@ -235,6 +249,22 @@ mod tests {
         assert_eq!(level_for(Avx2, Some("avx512")), Avx2);
         assert_eq!(level_for(Baseline, Some("avx2")), Baseline);
         assert_eq!(level_for(Avx2, Some("sse9")), Avx2);
+    }
+
+    #[test]
+    fn a_value_that_names_no_build_or_too_high_a_build_is_reported() {
+        use SimdLevel::*;
+        assert_eq!(warning_for(Avx512, None), None);
+        assert_eq!(warning_for(Avx512, Some(" ")), None);
+        assert_eq!(warning_for(Avx512, Some("avx2")), None);
+        assert_eq!(warning_for(Avx2, Some("avx2")), None);
+        let unknown = warning_for(Avx2, Some("sse9")).expect("a warning");
+        assert!(
+            unknown.contains("\"sse9\"") && unknown.ends_with("running avx2"),
+            "{unknown}"
+        );
+        let too_high = warning_for(Avx2, Some("avx512")).expect("a warning");
+        assert!(too_high.contains("at most avx2"), "{too_high}");
     }
 
     #[test]

@@ -51,6 +51,9 @@ enum Command {
 
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Some(warning) = damage_twin::simd::environment_warning() {
+        eprintln!("warning: {warning}");
+    }
     let result = match cli.command {
         // No subcommand: the desktop app on the built-in demo building.
         None => damage_twin::app::run(damage_twin::app::Launch::Demo),
