@@ -102,41 +102,92 @@ fn warning_for(detected: SimdLevel, requested: Option<&str>) -> Option<String> {
     }
 }
 
-/// How a kernel computes `a · b + c`: kernels generic over it are built with [`Fused`] (one
-/// rounding, one instruction) in the AVX builds and with [`Separate`] (two roundings) in the
-/// baseline one, where `f32::mul_add` would be a libm call per lane. Both directions of a
-/// computation that must agree bit for bit run in the same build. Call it from
-/// `#[inline(always)]` functions, not from large closures: a closure LLVM keeps out of line is
-/// compiled for the baseline CPU, where each `mul_add` becomes that libm call (10× slower).
-pub(crate) trait MulAdd {
+/// The arithmetic a build compiles to, where the builds differ: `a · b + c`, and `floor` /
+/// `ceil`. Kernels generic over it are built with [`Fused`] in the AVX builds and with
+/// [`Separate`] in the baseline one. Both directions of a computation that must agree bit for
+/// bit run in the same build. Call it from `#[inline(always)]` functions, not from large
+/// closures: a closure LLVM keeps out of line is compiled for the baseline CPU, where each
+/// `mul_add` becomes a libm call (10× slower).
+pub(crate) trait Arith {
+    /// `a · b + c`; its rounding depends on the build.
     fn mul_add(a: f32, b: f32, c: f32) -> f32;
+    /// `x.floor()`, the same bits in every build.
+    fn floor(x: f32) -> f32;
+    /// `x.ceil()`, the same bits in every build.
+    fn ceil(x: f32) -> f32;
 }
 
-/// `a · b + c` rounded once (an FMA instruction where the build enables `fma`).
+/// The AVX builds: `a · b + c` rounded once (an FMA instruction), `floor` and `ceil` one
+/// rounding instruction each.
 pub(crate) struct Fused;
 
-/// `a · b + c` rounded twice: the multiply, then the add.
+/// The baseline build: `a · b + c` rounded twice (the multiply, then the add), since
+/// `f32::mul_add` would be a libm call per lane. On x86-64 without SSE4.1 `f32::floor` and
+/// `f32::ceil` are libm calls too, which keep the loops around them from vectorising; there
+/// they are computed with adds and compares instead.
 pub(crate) struct Separate;
 
-impl MulAdd for Fused {
+impl Arith for Fused {
     #[inline(always)]
     fn mul_add(a: f32, b: f32, c: f32) -> f32 {
         a.mul_add(b, c)
     }
+    #[inline(always)]
+    fn floor(x: f32) -> f32 {
+        x.floor()
+    }
+    #[inline(always)]
+    fn ceil(x: f32) -> f32 {
+        x.ceil()
+    }
 }
 
-impl MulAdd for Separate {
+/// Whether this target's baseline lacks a rounding instruction (`roundps`, SSE4.1).
+const NO_ROUND_INSTRUCTION: bool =
+    cfg!(all(target_arch = "x86_64", not(target_feature = "sse4.1")));
+
+impl Arith for Separate {
     #[inline(always)]
     fn mul_add(a: f32, b: f32, c: f32) -> f32 {
         a * b + c
     }
+    #[inline(always)]
+    fn floor(x: f32) -> f32 {
+        if NO_ROUND_INSTRUCTION {
+            floor_by_adds(x)
+        } else {
+            x.floor()
+        }
+    }
+    #[inline(always)]
+    fn ceil(x: f32) -> f32 {
+        if NO_ROUND_INSTRUCTION {
+            -floor_by_adds(-x)
+        } else {
+            x.ceil()
+        }
+    }
+}
+
+/// `x.floor()` with the same bits (signed zeros, infinities and NaN included), from adds,
+/// compares and selects that vectorise with SSE2.
+#[inline(always)]
+fn floor_by_adds(x: f32) -> f32 {
+    // 2^23: every f32 of at least this magnitude is an integer, and adding then subtracting it
+    // rounds a smaller magnitude to the nearest integer (ties to even).
+    const TWO_POW_23: f32 = 8_388_608.0;
+    let magnitude = x.abs();
+    let nearest = ((magnitude + TWO_POW_23) - TWO_POW_23).copysign(x);
+    // `<` is false for NaN and the infinities: they, and the large integers, stay as they are.
+    let nearest = if magnitude < TWO_POW_23 { nearest } else { x };
+    if nearest > x { nearest - 1.0 } else { nearest }
 }
 
 /// Defines `$name`, which runs the `#[inline(always)]` kernel `$kernel` compiled for AVX-512VL
 /// or else AVX2 (both with FMA and POPCNT) as [`simd_level`] says (8-lane vectors instead of
 /// baseline SSE2's 4), and the baseline build otherwise. Kernels that add in a fixed order and
-/// use no FMA give the same bits on every path. A kernel written `$kernel::<MulAdd>` is generic over
-/// [`MulAdd`]: it gets [`Fused`] in the AVX builds and [`Separate`] in the baseline one, so its
+/// use no FMA give the same bits on every path. A kernel written `$kernel::<Arith>` is generic over
+/// [`Arith`]: it gets [`Fused`] in the AVX builds and [`Separate`] in the baseline one, so its
 /// bits depend on the CPU (still the same for any thread count on one machine).
 /// Attributes and doc comments before `$name` are kept.
 macro_rules! simd_dispatch {
@@ -149,7 +200,7 @@ macro_rules! simd_dispatch {
     };
     (
         $(#[$meta:meta])*
-        $name:ident => $kernel:ident :: <MulAdd> ( $($arg:ident : $ty:ty),* $(,)? ) $(-> $ret:ty)?
+        $name:ident => $kernel:ident :: <Arith> ( $($arg:ident : $ty:ty),* $(,)? ) $(-> $ret:ty)?
     ) => {
         $crate::simd::simd_dispatch!(@build [$(#[$meta])*] $name
             [$kernel::<$crate::simd::Fused>] [$kernel::<$crate::simd::Separate>]
@@ -172,7 +223,7 @@ macro_rules! simd_dispatch {
                 // The same 8-lane code with AVX-512VL's encodings: 32 vector registers instead
                 // of 16 (the blend loops keep their polynomial constants in registers instead
                 // of reloading them) and mask registers for the compares. Rust never contracts
-                // `a * b + c` into an FMA: only explicit `MulAdd::mul_add` calls become one.
+                // `a * b + c` into an FMA: only explicit `Arith::mul_add` calls become one.
                 #[target_feature(enable = "avx2,fma,popcnt,avx512f,avx512vl")]
                 #[allow(clippy::too_many_arguments)]
                 fn avx512($($arg: $ty),*) $(-> $ret)? {
@@ -265,6 +316,56 @@ mod tests {
         );
         let too_high = warning_for(Avx2, Some("avx512")).expect("a warning");
         assert!(too_high.contains("at most avx2"), "{too_high}");
+    }
+
+    #[test]
+    fn floor_and_ceil_by_adds_give_the_standard_bits() {
+        let mut values = vec![
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            0.49999997,
+            -0.49999997,
+            8_388_607.5,
+            -8_388_607.5,
+            8_388_608.0,
+            16_777_217.0,
+            1e30,
+            -1e30,
+            f32::MIN_POSITIVE,
+            -f32::MIN_POSITIVE,
+            1e-45,
+            -1e-45,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MAX,
+            f32::MIN,
+        ];
+        let mut rng = fastrand::Rng::with_seed(7);
+        for _ in 0..100_000 {
+            values.push((rng.f32() - 0.5) * 64.0);
+            values.push(f32::from_bits(rng.u32(..)));
+        }
+        for x in values {
+            let ceil = -floor_by_adds(-x);
+            if x.is_nan() {
+                assert!(floor_by_adds(x).is_nan() && ceil.is_nan());
+                continue;
+            }
+            assert_eq!(
+                floor_by_adds(x).to_bits(),
+                x.floor().to_bits(),
+                "floor({x:e})"
+            );
+            assert_eq!(ceil.to_bits(), x.ceil().to_bits(), "ceil({x:e})");
+            for build in [<Fused as Arith>::floor(x), <Separate as Arith>::floor(x)] {
+                assert_eq!(build.to_bits(), x.floor().to_bits(), "floor({x:e})");
+            }
+        }
     }
 
     #[test]

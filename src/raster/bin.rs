@@ -5,7 +5,7 @@
 use glam::Vec2;
 
 use super::{Projected, TILE_SIZE};
-use crate::simd::simd_dispatch;
+use crate::simd::{Arith, Fused, simd_dispatch};
 
 const TS: usize = TILE_SIZE as usize;
 
@@ -19,31 +19,39 @@ pub fn tile_grid(width: u32, height: u32) -> (u32, u32) {
 /// the tiles holding a pixel centre of the image inside `extent` (the box where alpha can reach
 /// 1/255). Dropping the other tiles changes no pixel of the image: every Gaussian there would be
 /// skipped by the alpha threshold, or blend only into the edge tiles' pixels beyond the image.
-#[inline(always)]
 pub fn tile_rect(mean2d: Vec2, radius: u32, extent: Vec2, width: u32, height: u32) -> [u32; 4] {
+    // `Fused` rounds with the standard `floor` and `ceil`: the same bits as every build.
+    tile_rect_in::<Fused>(mean2d, radius, extent, width, height)
+}
+
+/// [`tile_rect`] with the floor and ceil of the build it is compiled in.
+#[inline(always)]
+fn tile_rect_in<F: Arith>(
+    mean2d: Vec2,
+    radius: u32,
+    extent: Vec2,
+    width: u32,
+    height: u32,
+) -> [u32; 4] {
     // Branch-free, so that the binning's loop over every Gaussian vectorises.
     let (tiles_x, tiles_y) = tile_grid(width, height);
     let ts = TILE_SIZE as f32;
     let r = radius as f32;
     let clamp = |v: f32, hi: u32| v.max(0.0).min(hi as f32) as u32;
     // gsplat: floor / ceil of the radius rectangle in tile units.
-    let gx0 = clamp(((mean2d.x - r) / ts).floor(), tiles_x);
-    let gx1 = clamp(((mean2d.x + r) / ts).ceil(), tiles_x);
-    let gy0 = clamp(((mean2d.y - r) / ts).floor(), tiles_y);
-    let gy1 = clamp(((mean2d.y + r) / ts).ceil(), tiles_y);
+    let gx0 = clamp(F::floor((mean2d.x - r) / ts), tiles_x);
+    let gx1 = clamp(F::ceil((mean2d.x + r) / ts), tiles_x);
+    let gy0 = clamp(F::floor((mean2d.y - r) / ts), tiles_y);
+    let gy1 = clamp(F::ceil((mean2d.y + r) / ts), tiles_y);
     // Pixels p of the image whose centres p + 0.5 lie within extent of the mean.
-    let px0 = (mean2d.x - extent.x - 0.5).ceil().max(0.0);
-    let px1 = (mean2d.x + extent.x - 0.5)
-        .floor()
-        .min(width.saturating_sub(1) as f32);
-    let py0 = (mean2d.y - extent.y - 0.5).ceil().max(0.0);
-    let py1 = (mean2d.y + extent.y - 0.5)
-        .floor()
-        .min(height.saturating_sub(1) as f32);
-    let ex0 = clamp((px0 / ts).floor(), tiles_x);
-    let ex1 = clamp((px1 / ts).floor() + 1.0, tiles_x);
-    let ey0 = clamp((py0 / ts).floor(), tiles_y);
-    let ey1 = clamp((py1 / ts).floor() + 1.0, tiles_y);
+    let px0 = F::ceil(mean2d.x - extent.x - 0.5).max(0.0);
+    let px1 = F::floor(mean2d.x + extent.x - 0.5).min(width.saturating_sub(1) as f32);
+    let py0 = F::ceil(mean2d.y - extent.y - 0.5).max(0.0);
+    let py1 = F::floor(mean2d.y + extent.y - 0.5).min(height.saturating_sub(1) as f32);
+    let ex0 = clamp(F::floor(px0 / ts), tiles_x);
+    let ex1 = clamp(F::floor(px1 / ts) + 1.0, tiles_x);
+    let ey0 = clamp(F::floor(py0 / ts), tiles_y);
+    let ey1 = clamp(F::floor(py1 / ts) + 1.0, tiles_y);
     let (x0, x1) = (gx0.max(ex0), gx1.min(ex1));
     let (y0, y1) = (gy0.max(ey0), gy1.min(ey1));
     // `<=` is false for NaN, which drops it.
@@ -94,14 +102,15 @@ fn radix_sort_by_depth(keys: &mut Vec<u64>, scratch: &mut Vec<u64>) {
 }
 
 #[inline(always)]
-fn build_bins_impl(bins: &mut TileBins, projected: &Projected, width: u32, height: u32) {
-    bins.build_impl(projected, width, height);
+fn build_bins_impl<F: Arith>(bins: &mut TileBins, projected: &Projected, width: u32, height: u32) {
+    bins.build_impl::<F>(projected, width, height);
 }
 
 simd_dispatch!(
     /// [`TileBins::build`] with AVX2 (or AVX-512VL) where the CPU has it: the tile rectangles'
-    /// floor and ceil become single instructions instead of libm calls.
-    build_bins => build_bins_impl(bins: &mut TileBins, projected: &Projected, width: u32, height: u32)
+    /// floor and ceil become single instructions ([`Arith`]; the baseline x86-64 build uses
+    /// adds and compares rather than libm calls).
+    build_bins => build_bins_impl::<Arith>(bins: &mut TileBins, projected: &Projected, width: u32, height: u32)
 );
 
 /// Sorted intersections of one frame, with the scratch that builds them.
@@ -158,7 +167,7 @@ impl TileBins {
     }
 
     #[inline(always)]
-    fn build_impl(&mut self, projected: &Projected, width: u32, height: u32) {
+    fn build_impl<F: Arith>(&mut self, projected: &Projected, width: u32, height: u32) {
         let (tiles_x, tiles_y) = tile_grid(width, height);
         self.tiles_x = tiles_x;
         self.tiles_y = tiles_y;
@@ -180,7 +189,7 @@ impl TileBins {
             .zip(&projected.radii)
             .zip(&projected.extents)
         {
-            *rect = tile_rect(mean2d, radius, extent, width, height);
+            *rect = tile_rect_in::<F>(mean2d, radius, extent, width, height);
         }
         for g in 0..n {
             let rect = self.rects[g];

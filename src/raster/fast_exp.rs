@@ -5,7 +5,7 @@
 //! (folded into the conic once per intersection): that saves the range reduction's multiplies
 //! on every pixel.
 
-use crate::simd::MulAdd;
+use crate::simd::Arith;
 
 /// `log2(e)`: `exp(x) = 2^(x · LOG2_E)`.
 pub(crate) const LOG2_E: f32 = std::f32::consts::LOG2_E;
@@ -17,7 +17,7 @@ pub(crate) const LOG2_E: f32 = std::f32::consts::LOG2_E;
 /// than after it (the same bits wherever `k · scale` is a normal number: both products are then
 /// the exact product rounded once).
 #[inline(always)]
-pub(crate) fn exp2_parts<F: MulAdd>(x: f32) -> (f32, f32) {
+pub(crate) fn exp2_parts<F: Arith>(x: f32) -> (f32, f32) {
     // Cephes `exp2f`: x = n + r with |r| <= 1/2, 2^r = 1 + r P(r), P of degree 5.
     // 1.5 * 2^23: adding it rounds to the nearest integer and leaves it in the low mantissa bits.
     const ROUND: f32 = 12_582_912.0;
@@ -42,14 +42,14 @@ pub(crate) fn exp2_parts<F: MulAdd>(x: f32) -> (f32, f32) {
 #[cfg(test)]
 mod tests {
     use super::{LOG2_E, exp2_parts};
-    use crate::simd::{Fused, MulAdd, Separate};
+    use crate::simd::{Arith, Fused, Separate};
 
-    fn fast_exp2<F: MulAdd>(x: f32) -> f32 {
+    fn fast_exp2<F: Arith>(x: f32) -> f32 {
         let (mantissa, scale) = exp2_parts::<F>(x);
         mantissa * scale
     }
 
-    fn worst_error_against_exp2<F: MulAdd>() -> f64 {
+    fn worst_error_against_exp2<F: Arith>() -> f64 {
         let mut worst = 0.0f64;
         let mut x = -125.0f32;
         while x <= 10.0 {
@@ -72,7 +72,7 @@ mod tests {
         }
     }
 
-    fn worst_error_prescaled<F: MulAdd>() -> f64 {
+    fn worst_error_prescaled<F: Arith>() -> f64 {
         let mut worst = 0.0f64;
         let mut sigma = 0.0f32;
         while sigma <= 12.0 {
@@ -96,7 +96,7 @@ mod tests {
         }
     }
 
-    fn saturates<F: MulAdd>() {
+    fn saturates<F: Arith>() {
         assert!(fast_exp2::<F>(-1e30) > 0.0 && fast_exp2::<F>(-1e30) < 1e-37);
         assert!(fast_exp2::<F>(f32::NEG_INFINITY) < 1e-37);
         assert!(fast_exp2::<F>(1e30).is_finite());

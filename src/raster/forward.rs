@@ -9,7 +9,7 @@ use super::bin::TileBins;
 use super::fast_exp::{LOG2_E, exp2_parts};
 use super::segments::SegmentStore;
 use super::{Projected, RenderOutput, RenderSettings, TILE_PIXELS, TILE_SIZE, TRANSMITTANCE_MIN};
-use crate::simd::{MulAdd, simd_dispatch};
+use crate::simd::{Arith, simd_dispatch};
 
 /// Pixels evaluated together (one AVX register of f32).
 pub(crate) const LANES: usize = 8;
@@ -118,7 +118,7 @@ impl RowTerms {
 /// -1 where it does not. The forward stores the latter for the backward to replay
 /// ([`replay_falloff`]), so both take identical decisions bit for bit.
 #[inline(always)]
-pub(crate) fn falloff<F: MulAdd>(
+pub(crate) fn falloff<F: Arith>(
     terms: &RowTerms,
     half: usize,
     dy: f32,
@@ -174,7 +174,7 @@ pub(crate) fn replay_falloff(
 /// Blends one tile into its planar state slice (`state_channels(L) * 256` floats).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn rasterize_tile_impl<F: MulAdd>(
+fn rasterize_tile_impl<F: Arith>(
     tile: usize,
     state: &mut [f32],
     masks: &mut [u32],
@@ -332,7 +332,7 @@ pub(crate) fn any_live(t: &[f32]) -> bool {
 
 simd_dispatch!(
     /// [`rasterize_tile_impl`] with AVX2 (or AVX-512VL) where the CPU has it.
-    rasterize_tile => rasterize_tile_impl::<MulAdd>(
+    rasterize_tile => rasterize_tile_impl::<Arith>(
         tile: usize,
         state: &mut [f32],
         masks: &mut [u32],

@@ -16,7 +16,7 @@ use super::{
     MAX_LABEL_CHANNELS, PixelGrads, Projected, RenderSettings, ScreenGrads, TILE_PIXELS, TILE_SIZE,
     TRANSMITTANCE_MIN,
 };
-use crate::simd::{MulAdd, simd_dispatch};
+use crate::simd::{Arith, simd_dispatch};
 
 const TS: usize = TILE_SIZE as usize;
 
@@ -94,7 +94,7 @@ fn gather_inputs(
 /// intersection even with no label channels).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn backward_tile_impl<F: MulAdd, const HAS_LABELS: bool>(
+fn backward_tile_impl<F: Arith, const HAS_LABELS: bool>(
     tile: usize,
     out: &mut [f32],
     masks: &[u32],
@@ -259,7 +259,7 @@ fn backward_tile_impl<F: MulAdd, const HAS_LABELS: bool>(
 /// [`backward_tile_impl`] with the label sums compiled in only when there are label channels.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn backward_tile_kernel<F: MulAdd>(
+fn backward_tile_kernel<F: Arith>(
     tile: usize,
     out: &mut [f32],
     masks: &[u32],
@@ -293,7 +293,7 @@ fn backward_tile_kernel<F: MulAdd>(
 
 simd_dispatch!(
     /// [`backward_tile_kernel`] with AVX2 (or AVX-512VL) where the CPU has it.
-    backward_tile => backward_tile_kernel::<MulAdd>(
+    backward_tile => backward_tile_kernel::<Arith>(
         tile: usize,
         out: &mut [f32],
         masks: &[u32],

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use super::bin::TileBins;
 use super::forward::{LANES, Splat2d};
 use super::{Projected, TILE_SIZE};
-use crate::simd::simd_dispatch;
+use crate::simd::{Arith, simd_dispatch};
 
 const TS: usize = TILE_SIZE as usize;
 
@@ -146,7 +146,7 @@ pub(crate) fn resize_for_overwrite<T: Copy + Default>(v: &mut Vec<T>, len: usize
 /// Writes the segment mask and the projected Gaussian of each intersection of `tile`; returns
 /// their total segment count.
 #[inline(always)]
-fn tile_masks_impl(
+fn tile_masks_impl<F: Arith>(
     tile: usize,
     masks: &mut [u32],
     splats: &mut [Splat2d],
@@ -166,10 +166,10 @@ fn tile_masks_impl(
     for ((mask, splat), &g) in masks.iter_mut().zip(splats.iter_mut()).zip(ids) {
         let g = g as usize;
         let sp = Splat2d::load(projected, g);
-        *mask = segment_mask(
+        *mask = segment_mask::<F>(
             &sp,
             power_max[g],
-            footprint(projected, g, ox, oy, inside),
+            footprint::<F>(projected, g, ox, oy, inside),
             ox,
             oy,
         );
@@ -180,10 +180,11 @@ fn tile_masks_impl(
 }
 
 simd_dispatch!(
-    /// [`tile_masks_impl`] with AVX2 (or AVX-512VL) where the CPU has it: the 16-row mask then
-    /// vectorises and rounds in registers (baseline x86-64 has no vector floor/ceil and calls
-    /// libm per row).
-    tile_masks => tile_masks_impl(
+    /// [`tile_masks_impl`] with AVX2 (or AVX-512VL) where the CPU has it: the 16-row mask
+    /// vectorises in 8 lanes and rounds with one instruction per bound ([`Arith`]'s floor and
+    /// ceil; the baseline x86-64 build computes them with adds and compares, since its libm
+    /// calls would keep the loop scalar).
+    tile_masks => tile_masks_impl::<Arith>(
         tile: usize,
         masks: &mut [u32],
         splats: &mut [Splat2d],
@@ -200,7 +201,7 @@ simd_dispatch!(
 /// conversion each. The edge tiles' pixels past the image are never blended: the forward starts
 /// them finished.
 #[inline(always)]
-pub(crate) fn footprint(
+pub(crate) fn footprint<F: Arith>(
     p: &Projected,
     g: usize,
     ox: f32,
@@ -209,8 +210,8 @@ pub(crate) fn footprint(
 ) -> [f32; 4] {
     let m = p.means2d[g];
     let e = p.extents[g];
-    let lo = |v: f32, n: usize| v.ceil().max(0.0).min(n as f32);
-    let hi = |v: f32, n: usize| (v.floor() + 1.0).max(0.0).min(n as f32);
+    let lo = |v: f32, n: usize| F::ceil(v).max(0.0).min(n as f32);
+    let hi = |v: f32, n: usize| (F::floor(v) + 1.0).max(0.0).min(n as f32);
     [
         lo(m.x - e.x - 0.5 - ox, columns),
         lo(m.y - e.y - 0.5 - oy, rows),
@@ -227,7 +228,7 @@ pub(crate) fn footprint(
 /// square roots vectorise instead of running one dependent chain per row. The 0.05 px padding
 /// dwarfs the rounding of the chord (a reciprocal instead of two divisions included).
 #[inline(always)]
-pub(crate) fn segment_mask(
+pub(crate) fn segment_mask<F: Arith>(
     sp: &Splat2d,
     power_max: f32,
     [x0, y0, x1, y1]: [f32; 4],
@@ -252,11 +253,10 @@ pub(crate) fn segment_mask(
             let root = disc.max(0.0).sqrt();
             let b_dy = sp.b * dy;
             // The roots are dx = (-b dy ± root) / a; the columns are mean.x - dx.
-            let l = (left_of_mean + (b_dy - root) * inv_a)
-                .ceil()
+            let l = F::ceil(left_of_mean + (b_dy - root) * inv_a)
                 .max(0.0)
                 .min(ts);
-            let h = ((right_of_mean + (b_dy + root) * inv_a).floor() + 1.0)
+            let h = (F::floor(right_of_mean + (b_dy + root) * inv_a) + 1.0)
                 .max(0.0)
                 .min(ts);
             // `!(disc >= 0)` also empties the row when disc is NaN.

@@ -10,7 +10,7 @@
 
 use rayon::prelude::*;
 
-use crate::simd::{MulAdd, simd_dispatch};
+use crate::simd::{Arith, simd_dispatch};
 
 /// Window side and radius (3DGS `window_size = 11`).
 pub const SSIM_WINDOW: usize = 11;
@@ -127,7 +127,7 @@ impl SsimWorkspace {
 /// `N` outputs of the horizontal pass from `src[..N + 2·RADIUS]`, taps added in order. `N`
 /// independent accumulators: one would leave the adds waiting on each other's latency.
 #[inline(always)]
-fn hblur_block<F: MulAdd, const N: usize>(
+fn hblur_block<F: Arith, const N: usize>(
     kernel: &[f32; SSIM_WINDOW],
     src: &[f32],
     out: &mut [f32],
@@ -148,7 +148,7 @@ fn hblur_block<F: MulAdd, const N: usize>(
 
 /// Horizontal pass of one padded row: `out[i] = Σ_k g[k]·src[i + k]`.
 #[inline(always)]
-fn hblur_row<F: MulAdd>(kernel: &[f32; SSIM_WINDOW], src: &[f32], out: &mut [f32]) {
+fn hblur_row<F: Arith>(kernel: &[f32; SSIM_WINDOW], src: &[f32], out: &mut [f32]) {
     let width = out.len();
     let mut x = 0;
     while x + 4 * LANES <= width {
@@ -178,7 +178,7 @@ fn hblur_row<F: MulAdd>(kernel: &[f32; SSIM_WINDOW], src: &[f32], out: &mut [f32
 /// `FULL` (every tap inside) makes the tap count a constant, so the accumulators stay in
 /// registers instead of going through the stack on every tap.
 #[inline(always)]
-fn vblur_block<F: MulAdd, const N: usize, const FULL: bool>(
+fn vblur_block<F: Arith, const N: usize, const FULL: bool>(
     kernel: &[f32; SSIM_WINDOW],
     ring: &[f32],
     offsets: &[usize; SSIM_WINDOW],
@@ -200,7 +200,7 @@ fn vblur_block<F: MulAdd, const N: usize, const FULL: bool>(
 
 /// [`vblur_block`] over a whole row, in 32- and 8-column blocks.
 #[inline(always)]
-fn vblur_blocks<F: MulAdd, const FULL: bool>(
+fn vblur_blocks<F: Arith, const FULL: bool>(
     kernel: &[f32; SSIM_WINDOW],
     ring: &[f32],
     offsets: &[usize; SSIM_WINDOW],
@@ -231,7 +231,7 @@ fn vblur_blocks<F: MulAdd, const FULL: bool>(
 /// Vertical pass: row `y` of a plane of `height` rows, zero outside it, from the ring holding
 /// rows `y - RADIUS ..= y + RADIUS` (those inside the plane).
 #[inline(always)]
-fn vblur_row<F: MulAdd>(
+fn vblur_row<F: Arith>(
     kernel: &[f32; SSIM_WINDOW],
     ring: &[f32],
     y: usize,
@@ -256,7 +256,7 @@ fn vblur_row<F: MulAdd>(
 /// row per map, `rings` one ring of `SSIM_WINDOW` rows per map; row `y` goes to slot
 /// `y % SSIM_WINDOW`.
 #[inline(always)]
-fn hblur_into_ring<F: MulAdd>(
+fn hblur_into_ring<F: Arith>(
     kernel: &[f32; SSIM_WINDOW],
     padded: &[f32],
     width: usize,
@@ -273,7 +273,7 @@ fn hblur_into_ring<F: MulAdd>(
 /// Vertical pass of row `y` (of `height`) of every map, `width` values wide, from their rings
 /// (`SSIM_WINDOW` rows each) into `out` (one row per map).
 #[inline(always)]
-fn vblur_from_ring<F: MulAdd>(
+fn vblur_from_ring<F: Arith>(
     kernel: &[f32; SSIM_WINDOW],
     rings: &[f32],
     width: usize,
@@ -362,7 +362,7 @@ struct Frame<'a> {
 /// Rows `y0..y1` of every channel: their weighted SSIM sums into `s.sums`, and with `v_rows`
 /// (those rows of `dS/dx`, interleaved RGB) the gradient.
 #[inline(always)]
-fn band_impl<F: MulAdd>(
+fn band_impl<F: Arith>(
     f: &Frame,
     y0: usize,
     y1: usize,
@@ -464,7 +464,7 @@ fn band_impl<F: MulAdd>(
     }
 }
 
-simd_dispatch!(band => band_impl::<MulAdd>(
+simd_dispatch!(band => band_impl::<Arith>(
     f: &Frame,
     y0: usize,
     y1: usize,
