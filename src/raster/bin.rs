@@ -110,7 +110,12 @@ simd_dispatch!(
     /// [`TileBins::build`] with AVX2 (or AVX-512VL) where the CPU has it: the tile rectangles'
     /// floor and ceil become single instructions ([`Arith`]; the baseline x86-64 build uses
     /// adds and compares rather than libm calls).
-    build_bins => build_bins_impl::<Arith>(bins: &mut TileBins, projected: &Projected, width: u32, height: u32)
+    build_bins => build_bins_impl::<Arith>(
+        bins: &mut TileBins,
+        projected: &Projected,
+        width: u32,
+        height: u32,
+    )
 );
 
 /// Sorted intersections of one frame, with the scratch that builds them.
