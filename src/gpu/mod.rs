@@ -3,7 +3,9 @@
 //! Host launch code lives here, one file per stage; no UI code and no per-frame read-back.
 
 pub mod context;
+mod count_probe;
 pub mod emit;
+mod frame_buffers;
 pub mod kernel;
 pub mod prefix_sum;
 pub mod project;

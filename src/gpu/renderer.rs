@@ -2,12 +2,13 @@
 //! per-frame scratch and the stages, records the whole forward pass into a caller's encoder
 //! (viewer) or renders to CPU images (tests, CLI). No kernel code, no UI code.
 
-use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use glam::Vec3;
 
+use super::count_probe::CountProbe;
 use super::emit::{EmitBuffers, EmitStage};
+use super::frame_buffers::{FrameBuffers, IsectBuffers};
 use super::kernel;
 use super::prefix_sum::PrefixSum;
 use super::project::{
@@ -86,192 +87,6 @@ pub struct StageTimings {
     /// Wall time of the whole frame, submit to completion.
     pub total_ms: f64,
     pub intersections: u32,
-}
-
-/// Per-frame scratch sized by the model capacity, the image size and the label count.
-struct FrameBuffers {
-    gaussian_capacity: usize,
-    width: u32,
-    height: u32,
-    label_channels: usize,
-    uniforms: wgpu::Buffer,
-    projected: wgpu::Buffer,
-    depth_keys: wgpu::Buffer,
-    depth_gids: wgpu::Buffer,
-    labels: wgpu::Buffer,
-    offsets: wgpu::Buffer,
-    ranges: wgpu::Buffer,
-    out_color: wgpu::Buffer,
-    out_depth: wgpu::Buffer,
-    out_labels: wgpu::Buffer,
-    texture: wgpu::Texture,
-    view: wgpu::TextureView,
-}
-
-impl FrameBuffers {
-    fn new(
-        device: &wgpu::Device,
-        gaussian_capacity: usize,
-        width: u32,
-        height: u32,
-        label_channels: usize,
-    ) -> Self {
-        let none = wgpu::BufferUsages::empty();
-        let n = gaussian_capacity as u64;
-        let pixels = width as u64 * height as u64;
-        let [tx, ty] = tile_bounds(width, height);
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("splat render"),
-            size: wgpu::Extent3d {
-                width,
-                height,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba8Unorm,
-            usage: wgpu::TextureUsages::STORAGE_BINDING
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
-        let view = texture.create_view(&Default::default());
-        FrameBuffers {
-            gaussian_capacity,
-            width,
-            height,
-            label_channels,
-            uniforms: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("frame uniforms"),
-                size: std::mem::size_of::<FrameUniforms>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
-            projected: kernel::storage(device, "projected", n * PROJECTED_BYTES, none),
-            depth_keys: kernel::storage(device, "depth_keys", n * 4, none),
-            depth_gids: kernel::storage(device, "depth_gids", n * 4, none),
-            labels: kernel::storage(device, "labels", n * label_channels as u64 * 4, none),
-            offsets: kernel::storage(device, "isect_offsets", n * 4, none),
-            ranges: kernel::storage(device, "tile_ranges", tx as u64 * ty as u64 * 8, none),
-            out_color: kernel::storage(device, "out_color", pixels * 16, none),
-            out_depth: kernel::storage(device, "out_depth", pixels * 4, none),
-            out_labels: kernel::storage(
-                device,
-                "out_labels",
-                pixels * label_channels as u64 * 4,
-                none,
-            ),
-            texture,
-            view,
-        }
-    }
-}
-
-/// Intersection buffers and the tile sort, sized by the intersection capacity.
-struct IsectBuffers {
-    capacity: u32,
-    tile_keys: wgpu::Buffer,
-    isect_gids: wgpu::Buffer,
-    tile_sort: RadixSort,
-}
-
-impl IsectBuffers {
-    fn new(device: &wgpu::Device, sorter: &RadixSort, capacity: u32) -> IsectBuffers {
-        let none = wgpu::BufferUsages::empty();
-        IsectBuffers {
-            capacity,
-            tile_keys: kernel::storage(device, "tile_keys", capacity as u64 * 4, none),
-            isect_gids: kernel::storage(device, "isect_gids", capacity as u64 * 4, none),
-            tile_sort: sorter.resized(device, capacity),
-        }
-    }
-}
-
-/// Non-blocking read of the last frame's intersection total, so the next frames can grow the
-/// intersection buffers without stalling: copy (frame k), map (frame k+1), read when mapped.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum ProbeState {
-    Idle,
-    Copied,
-    Mapping,
-    Mapped,
-    Failed,
-}
-
-struct CountProbe {
-    staging: wgpu::Buffer,
-    state: Arc<Mutex<ProbeState>>,
-}
-
-impl CountProbe {
-    fn new(device: &wgpu::Device) -> CountProbe {
-        CountProbe {
-            staging: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("isect count probe"),
-                size: 4,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
-            state: Arc::new(Mutex::new(ProbeState::Idle)),
-        }
-    }
-
-    fn state(&self) -> ProbeState {
-        self.state.lock().map(|s| *s).unwrap_or(ProbeState::Failed)
-    }
-
-    fn set(&self, s: ProbeState) {
-        if let Ok(mut g) = self.state.lock() {
-            *g = s;
-        }
-    }
-
-    /// Advances the probe; returns the total once a copy has been mapped.
-    fn poll(&self, device: &wgpu::Device) -> Option<u32> {
-        match self.state() {
-            ProbeState::Copied => {
-                // The encoder holding the copy was submitted by now (one render per frame).
-                self.set(ProbeState::Mapping);
-                let state = self.state.clone();
-                self.staging
-                    .slice(..)
-                    .map_async(wgpu::MapMode::Read, move |r| {
-                        if let Ok(mut g) = state.lock() {
-                            *g = if r.is_ok() {
-                                ProbeState::Mapped
-                            } else {
-                                ProbeState::Failed
-                            };
-                        }
-                    });
-                let _ = device.poll(wgpu::PollType::Poll);
-                None
-            }
-            ProbeState::Mapping => {
-                let _ = device.poll(wgpu::PollType::Poll);
-                None
-            }
-            ProbeState::Mapped => {
-                // wgpu 30: mapping a range can fail; a failed probe just reports nothing this frame.
-                let total = match self.staging.slice(..).get_mapped_range() {
-                    Ok(data) => Some(u32::from_le_bytes([data[0], data[1], data[2], data[3]])),
-                    Err(_) => None,
-                };
-                self.staging.unmap();
-                self.set(ProbeState::Idle);
-                total
-            }
-            ProbeState::Idle | ProbeState::Failed => None,
-        }
-    }
-
-    fn record_copy(&self, encoder: &mut wgpu::CommandEncoder, count: &wgpu::Buffer) {
-        if self.state() == ProbeState::Idle {
-            encoder.copy_buffer_to_buffer(count, 0, &self.staging, 0, 4);
-            self.set(ProbeState::Copied);
-        }
-    }
 }
 
 /// What `prepare` settled for the frame being recorded.
