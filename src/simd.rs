@@ -279,10 +279,7 @@ pub fn rerun_tests_on_lower_builds(tests: &[&str]) {
 #[doc(hidden)]
 pub fn assert_level_follows_the_environment() {
     let requested = std::env::var(SIMD_ENV).ok();
-    let expected = match requested.as_deref().and_then(SimdLevel::parse) {
-        Some(level) => level.min(SimdLevel::detected()),
-        None => SimdLevel::detected(),
-    };
+    let expected = level_for(SimdLevel::detected(), requested.as_deref());
     assert_eq!(simd_level(), expected, "{SIMD_ENV}={requested:?}");
 }
 

@@ -181,7 +181,7 @@ fn tile_masks_impl<F: Arith>(
 
 simd_dispatch!(
     /// [`tile_masks_impl`] with AVX2 (or AVX-512VL) where the CPU has it: the 16-row mask
-    /// vectorises in 8 lanes and rounds with one instruction per bound ([`Arith`]'s floor and
+    /// vectorises and rounds with one instruction per bound ([`Arith`]'s floor and
     /// ceil; the baseline x86-64 build computes them with adds and compares, since its libm
     /// calls would keep the loop scalar).
     tile_masks => tile_masks_impl::<Arith>(
