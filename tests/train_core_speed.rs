@@ -70,7 +70,8 @@ fn adam_time_per_100k_gaussians() {
     let cloud = random_points(100_000, 1.3, 3);
     let t = Instant::now();
     let init = from_points(
-        &cloud,
+        &cloud.0,
+        &cloud.1,
         &InitOptions {
             label_channels: 3,
             ..InitOptions::default()

@@ -84,7 +84,8 @@ fn scene() -> (Vec<TrainView>, Vec<TrainView>) {
 fn initial() -> Splats {
     let points = random_points(300, 0.6, 3);
     from_points(
-        &points,
+        &points.0,
+        &points.1,
         &InitOptions {
             sh_degree: 1,
             ..InitOptions::default()

@@ -2,7 +2,6 @@
 //! rendered damage back and scoring it, and the mask-noise study. Uses the engine; contains no
 //! rendering or optimisation of its own.
 
-pub mod classes;
 pub mod evaluate;
 pub mod mode;
 pub mod overlay;
@@ -10,7 +9,8 @@ pub mod palette;
 pub mod reference;
 pub mod setup;
 
-pub use classes::{DamageClass, NEW_DAMAGE_COLOUR};
+// The classes live beneath `scene` (mask folders and PLY properties are named by them).
+pub use crate::scene::damage_class::{DamageClass, NEW_DAMAGE_COLOUR};
 pub use mode::TrainMode;
 pub use palette::Palette;
 pub mod study;

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use serde::Serialize;
 
-use crate::damage::DamageClass;
+use crate::scene::DamageClass;
 use crate::scene::{Camera, Mask, PointCloud, RgbImage};
 
 /// Which reader recognised the dataset.

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use crate::damage::DamageClass;
+use crate::scene::DamageClass;
 use crate::scene::{Mask, SceneError};
 
 /// Largest Euclidean RGB distance at which a colour-coded pixel still counts as a palette colour.

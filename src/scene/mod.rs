@@ -4,6 +4,7 @@
 pub mod atomic;
 pub mod camera;
 pub mod colmap;
+pub mod damage_class;
 pub mod dataset;
 pub mod error;
 pub mod image;
@@ -17,6 +18,7 @@ pub mod transforms;
 pub mod undistort;
 
 pub use camera::{Camera, Intrinsics};
+pub use damage_class::{DamageClass, NEW_DAMAGE_COLOUR};
 pub use dataset::{Dataset, DatasetFormat, Distortion, LoadedView, Split, View};
 pub use error::SceneError;
 pub use image::{ImageScale, Mask, RgbImage};

@@ -100,7 +100,7 @@ pub(crate) fn stem_of(path: &Path) -> String {
 /// `masks/` beside the images and its per-class counts.
 pub(crate) fn find_masks(
     root: &Path,
-) -> (Option<PathBuf>, BTreeMap<crate::damage::DamageClass, usize>) {
+) -> (Option<PathBuf>, BTreeMap<crate::scene::DamageClass, usize>) {
     let dir = root.join("masks");
     if dir.is_dir() {
         let counts = crate::scene::masks::count_masks(&dir);

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::damage::{DamageClass, NEW_DAMAGE_COLOUR};
+use crate::scene::{DamageClass, NEW_DAMAGE_COLOUR};
 use crate::scene::atomic::write_atomic;
 use crate::scene::{ImageScale, SceneError};
 

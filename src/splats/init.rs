@@ -8,7 +8,6 @@ use rayon::prelude::*;
 use std::num::NonZeroUsize;
 
 use super::model::{SH_C0, SplatMeta, Splats, logit};
-use crate::scene::PointCloud;
 
 /// 3DGS clamps the mean squared neighbour distance at 1e-7 (`torch.clamp_min(dist2, 1e-7)`)
 /// so coincident points get a tiny, finite scale instead of `log(0) = -inf`.
@@ -101,18 +100,22 @@ pub fn mean_neighbour_dist2(points: &[Vec3]) -> Vec<f32> {
 /// Gaussians at the points: isotropic scale `sqrt(mean squared 3-NN distance)` (3DGS), identity
 /// rotation, opacity `opts.opacity`, SH DC from the colour (`(rgb - 0.5) / SH_C0`), higher SH zero,
 /// label logits `opts.raw_label`, ids counting up from `opts.first_id`.
-pub fn from_points(points: &PointCloud, opts: &InitOptions) -> Result<Splats, InitError> {
-    if points.is_empty() {
+/// Plain slices, so that any point source (SfM, a PLY, random) can seed a model.
+pub fn from_points(
+    positions: &[Vec3],
+    colours: &[[u8; 3]],
+    opts: &InitOptions,
+) -> Result<Splats, InitError> {
+    if positions.is_empty() {
         return Err(InitError::Empty);
     }
-    if points.colours.len() != points.positions.len() {
+    if colours.len() != positions.len() {
         return Err(InitError::ColourCount {
-            positions: points.positions.len(),
-            colours: points.colours.len(),
+            positions: positions.len(),
+            colours: colours.len(),
         });
     }
-    if let Some((index, p)) = points
-        .positions
+    if let Some((index, p)) = positions
         .iter()
         .enumerate()
         .find(|(_, p)| !p.is_finite())
@@ -122,16 +125,16 @@ pub fn from_points(points: &PointCloud, opts: &InitOptions) -> Result<Splats, In
             position: p.to_array(),
         });
     }
-    let n = points.len();
-    let dist2 = mean_neighbour_dist2(&points.positions);
+    let n = positions.len();
+    let dist2 = mean_neighbour_dist2(positions);
     let mut splats = Splats::empty(opts.sh_degree, opts.label_channels);
     let k3 = splats.sh_coeffs() * 3;
-    splats.means = points.positions.clone();
+    splats.means = positions.to_vec();
     splats.log_scales = dist2.iter().map(|&d2| Vec3::splat(0.5 * d2.ln())).collect();
     splats.rotations = vec![Quat::IDENTITY; n];
     splats.raw_opacities = vec![logit(opts.opacity); n];
     splats.sh = vec![0.0; n * k3];
-    for (g, rgb) in points.colours.iter().enumerate() {
+    for (g, rgb) in colours.iter().enumerate() {
         for (dc, &v) in splats.sh[g * k3..g * k3 + 3].iter_mut().zip(rgb) {
             *dc = (v as f32 / 255.0 - 0.5) / SH_C0;
         }
@@ -146,19 +149,18 @@ pub fn from_points(points: &PointCloud, opts: &InitOptions) -> Result<Splats, In
 }
 
 /// `n` points uniform in `[-half_extent, half_extent]³` with uniform random colours (3DGS's
-/// NeRF-synthetic initialisation uses 100 000 points in `[-1.3, 1.3]³`). Feed to `from_points`.
-pub fn random_points(n: usize, half_extent: f32, seed: u64) -> PointCloud {
+/// NeRF-synthetic initialisation uses 100 000 points in `[-1.3, 1.3]³`). Positions and colours,
+/// to feed to `from_points`.
+pub fn random_points(n: usize, half_extent: f32, seed: u64) -> (Vec<Vec3>, Vec<[u8; 3]>) {
     let mut rng = fastrand::Rng::with_seed(seed);
-    let mut cloud = PointCloud {
-        positions: Vec::with_capacity(n),
-        colours: Vec::with_capacity(n),
-    };
+    let mut positions = Vec::with_capacity(n);
+    let mut colours = Vec::with_capacity(n);
     for _ in 0..n {
         let p = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * (2.0 * half_extent) - half_extent;
-        cloud.positions.push(p);
-        cloud.colours.push([rng.u8(..), rng.u8(..), rng.u8(..)]);
+        positions.push(p);
+        colours.push([rng.u8(..), rng.u8(..), rng.u8(..)]);
     }
-    cloud
+    (positions, colours)
 }
 
 #[cfg(test)]
@@ -166,11 +168,11 @@ mod tests {
     use super::*;
     use crate::splats::model::sigmoid;
 
-    fn cloud(points: &[[f32; 3]]) -> PointCloud {
-        PointCloud {
-            positions: points.iter().map(|&p| Vec3::from(p)).collect(),
-            colours: vec![[255, 0, 128]; points.len()],
-        }
+    fn cloud(points: &[[f32; 3]]) -> (Vec<Vec3>, Vec<[u8; 3]>) {
+        (
+            points.iter().map(|&p| Vec3::from(p)).collect(),
+            vec![[255, 0, 128]; points.len()],
+        )
     }
 
     #[test]
@@ -183,7 +185,7 @@ mod tests {
             [0.0, 0.0, 3.0],
             [100.0, 0.0, 0.0],
         ]);
-        let s = from_points(&c, &InitOptions::default()).unwrap();
+        let s = from_points(&c.0, &c.1, &InitOptions::default()).unwrap();
         let want = ((1.0f32 + 4.0 + 9.0) / 3.0).sqrt().ln();
         assert!((s.log_scales[0] - Vec3::splat(want)).abs().max_element() < 1e-5);
         s.check_lengths().unwrap();
@@ -192,7 +194,7 @@ mod tests {
     #[test]
     fn coincident_points_get_a_finite_clamped_scale() {
         let c = cloud(&[[1.0, 1.0, 1.0]; 50]);
-        let s = from_points(&c, &InitOptions::default()).unwrap();
+        let s = from_points(&c.0, &c.1, &InitOptions::default()).unwrap();
         let want = 0.5 * MIN_NEIGHBOUR_DIST2.ln();
         assert!(
             s.log_scales
@@ -211,7 +213,7 @@ mod tests {
             survey: 2,
             ..InitOptions::default()
         };
-        let s = from_points(&c, &opts).unwrap();
+        let s = from_points(&c.0, &c.1, &opts).unwrap();
         assert!((sigmoid(s.raw_opacities[1]) - 0.1).abs() < 1e-6);
         let sh = s.sh_of(1);
         assert!((sh[0] * SH_C0 + 0.5 - 1.0).abs() < 1e-6);
@@ -228,12 +230,12 @@ mod tests {
     #[test]
     fn bad_point_clouds_are_refused() {
         assert_eq!(
-            from_points(&PointCloud::default(), &InitOptions::default()),
+            from_points(&[], &[], &InitOptions::default()),
             Err(InitError::Empty)
         );
         let c = cloud(&[[0.0; 3], [f32::NAN, 0.0, 0.0]]);
         assert!(matches!(
-            from_points(&c, &InitOptions::default()),
+            from_points(&c.0, &c.1, &InitOptions::default()),
             Err(InitError::NonFinite { index: 1, .. })
         ));
     }

@@ -3,7 +3,7 @@
 //! buffers only; the clean masks are kept elsewhere and must never be passed here.
 
 use super::noise::value_noise;
-use crate::damage::DamageClass;
+use crate::scene::DamageClass;
 
 /// Exactly `round(fraction · n)` views, chosen by the seed.
 pub fn noisy_views(n: usize, fraction: f32, seed: u64) -> Vec<bool> {

@@ -8,7 +8,7 @@ use super::building::{BEAM_DEPTH, Building, COLUMN_HALF, Facade, SLAB_DEPTH};
 use super::cracks::{Crack, CrackField, CrackSeed, grow};
 use super::geometry::{Component, Geometry, Prim, Ray};
 use super::noise::{band_coverage, value_noise};
-use crate::damage::DamageClass;
+use crate::scene::DamageClass;
 
 /// Bars exposed in the core of a spall.
 #[derive(Clone, Debug, PartialEq)]

@@ -108,7 +108,7 @@ pub fn render_view(ctx: &SceneContext, camera: &Camera) -> ViewRender {
     }
 }
 
-fn class_bit(class: Option<crate::damage::DamageClass>) -> u8 {
+fn class_bit(class: Option<crate::scene::DamageClass>) -> u8 {
     class.map_or(0, |c| 1 << c.channel())
 }
 

@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use crate::damage::DamageClass;
+use crate::scene::DamageClass;
 use crate::scene::{Dataset, ImageScale, Mask, SceneError, Split};
 use crate::train::spec::TrainView;
 
@@ -137,14 +137,14 @@ pub fn initial_splats(
         ..InitOptions::default()
     };
     if let Some(points) = dataset.points.as_ref().filter(|p| !p.is_empty()) {
-        return from_points(points, &init);
+        return from_points(&points.positions, &points.colours, &init);
     }
     let (centre, half) = look_at_box(views);
-    let mut cloud = random_points(options.random_points, half, options.seed);
-    for p in &mut cloud.positions {
+    let (mut positions, colours) = random_points(options.random_points, half, options.seed);
+    for p in &mut positions {
         *p += centre;
     }
-    from_points(&cloud, &init)
+    from_points(&positions, &colours, &init)
 }
 
 /// Centre and half size of the box the cameras look at (see `initial_splats`).

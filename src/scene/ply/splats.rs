@@ -8,7 +8,7 @@ use std::path::Path;
 use glam::{Quat, Vec3};
 
 use super::header::RowReader;
-use crate::damage::DamageClass;
+use crate::scene::DamageClass;
 use crate::scene::SceneError;
 use crate::scene::atomic::write_atomic;
 use crate::splats::Splats;

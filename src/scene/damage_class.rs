@@ -1,5 +1,6 @@
 //! The damage classes (QuakeCity's three) and their display colours. The identifiers name mask
-//! folders, JSON keys and PLY properties, so they never change spelling.
+//! folders, JSON keys and PLY properties, so they never change spelling. They live beneath `scene`
+//! because the readers name files by them; `damage` re-exports them.
 
 use serde::{Deserialize, Serialize};
 
