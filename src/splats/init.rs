@@ -244,8 +244,8 @@ mod tests {
     fn random_points_fill_the_box_deterministically() {
         let a = random_points(1000, 1.3, 7);
         assert_eq!(a, random_points(1000, 1.3, 7));
-        assert!(a.positions.iter().all(|p| p.abs().max_element() <= 1.3));
-        let s = from_points(&a, &InitOptions::default()).unwrap();
+        assert!(a.0.iter().all(|p| p.abs().max_element() <= 1.3));
+        let s = from_points(&a.0, &a.1, &InitOptions::default()).unwrap();
         // 1000 points in a 2.6³ box: typical spacing ≈ 2.6 / 10, so scales are O(0.1).
         let mean = s.log_scales.iter().map(|l| l.x.exp()).sum::<f32>() / 1000.0;
         assert!(mean > 0.05 && mean < 0.4, "{mean}");
@@ -253,7 +253,8 @@ mod tests {
 
     #[test]
     fn single_point_gets_the_minimum_scale() {
-        let s = from_points(&cloud(&[[0.0; 3]]), &InitOptions::default()).unwrap();
+        let c = cloud(&[[0.0; 3]]);
+        let s = from_points(&c.0, &c.1, &InitOptions::default()).unwrap();
         assert!(s.log_scales[0].is_finite());
     }
 }
