@@ -4,6 +4,7 @@
 //! `splats` is the model, `raster` renders and differentiates it on the CPU, `gpu` does the same
 //! in WGSL, `train` optimises, `damage`/`timeline` use the engine, `synth` makes the demo building.
 
+#[cfg(feature = "app")]
 pub mod app;
 pub mod damage;
 pub mod gpu;
@@ -14,4 +15,5 @@ pub mod scene;
 pub mod simd;
 pub mod splats;
 pub mod synth;
+pub mod timeline;
 pub mod train;

@@ -1,5 +1,6 @@
 //! The viewer's navigation maths, without a window: frame-rate independence, orbit / pan / zoom /
 //! fly behaviour, snapping to survey cameras, the adaptive resolution and frustum picking.
+#![cfg(feature = "app")]
 
 use damage_twin::app::camera_controller::{
     CameraController, CameraInput, NavMode, OrbitPose, estimate_up,

@@ -2,6 +2,7 @@
 //! egui_kittest: the splats must reach the viewport through the GPU paint callback, and through
 //! the CPU worker that a software driver uses by default. Asserts pixel statistics, not a
 //! snapshot (snapshots differ across Mesa versions, STACK.md).
+#![cfg(feature = "app")]
 
 use std::sync::Arc;
 

@@ -1,17 +1,18 @@
 //! The viewer's state driven headless through commands, as panels drive it: settings edits and
 //! their persistence, snapping to survey views, saving and reopening a twin, exporting, and the
 //! charts' history.
+#![cfg(feature = "app")]
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use damage_twin::app::commands::Command;
-use damage_twin::app::history::{History, Sample};
 use damage_twin::app::settings::{CompareMode, Settings, TrainMode, TrainingSettings};
 use damage_twin::app::state::{AppState, Photo, WorkerResult};
 use damage_twin::scene::{Camera, Dataset, DatasetFormat, Intrinsics, Split, View};
 use damage_twin::splats::Splats;
+use damage_twin::train::history::{History, Sample};
 use glam::{Quat, Vec3};
 
 /// Polls until `done` holds (worker threads report asynchronously), at most 10 s.
@@ -229,9 +230,21 @@ fn a_saved_twin_opens_again_with_the_same_model() {
     let project = dir.path().join("twin");
     state.apply(Command::SaveProject(project.clone()));
     assert!(project.join("twin.ron").is_file(), "{:?}", state.log);
-    assert!(project.join("model.ply").is_file());
-    let leftovers: Vec<_> = std::fs::read_dir(&project)
-        .expect("readable")
+    // Saved through the timeline: one survey (a bare model has no dataset), its model in its
+    // own folder; saving again keeps the one survey rather than failing on a duplicate name.
+    state.apply(Command::SaveProject(project.clone()));
+    let twin = damage_twin::timeline::Twin::open(&project).expect("twin.ron reads back");
+    assert_eq!(twin.project.surveys.len(), 1, "{:?}", state.log);
+    let model = twin
+        .model_path(&twin.project.surveys[0].name)
+        .expect("survey")
+        .expect("a model path");
+    assert!(model.is_file(), "{}", model.display());
+    assert!(model.starts_with(&project));
+    let survey_dir = model.parent().expect("a folder").to_path_buf();
+    let leftovers: Vec<_> = [&project, &survey_dir]
+        .iter()
+        .flat_map(|dir| std::fs::read_dir(dir).expect("readable"))
         .filter_map(|e| e.ok())
         .filter(|e| e.file_name().to_string_lossy().contains("tmp"))
         .collect();

@@ -1,5 +1,6 @@
 //! Live training as the viewer drives it: a tiny demo building opened and trained through
 //! commands, with pause / resume / stop, while the state is only ever polled (never waits).
+#![cfg(feature = "app")]
 
 use std::time::{Duration, Instant};
 
@@ -32,7 +33,7 @@ fn status(state: &AppState) -> Option<RunStatus> {
 fn the_viewer_trains_a_small_building_live_and_obeys_pause_and_stop() {
     let dir = tempfile::tempdir().expect("temp dir");
     // 8 views at 96×64: the smallest building that still trains meaningfully in seconds.
-    let data = damage_twin::app::demo::ensure(&dir.path().join("demo"), 8, 96, 64, &|_, _| {})
+    let data = damage_twin::synth::demo::ensure(&dir.path().join("demo"), 8, 96, 64, &|_, _| {})
         .expect("synth generates the demo");
 
     let settings = Settings {

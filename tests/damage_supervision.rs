@@ -16,7 +16,8 @@ use damage_twin::scene::open::OpenOptions;
 use damage_twin::scene::{Dataset, ImageScale};
 use damage_twin::splats::Splats;
 use damage_twin::synth::params::SynthParams;
-use damage_twin::train::job::{JobOptions, TrainJob};
+use damage_twin::train::job::JobOptions;
+use damage_twin::train::run::train;
 
 /// One survey of the demo building at 240×135 with 24 views, generated once per test binary.
 fn survey() -> &'static Dataset {
@@ -60,7 +61,7 @@ fn train_and_score(config: &RunConfig) -> (Splats, Iou, Iou, Iou) {
     assert_eq!(run.mode, config.mode);
     let heldout_indices = run.heldout_indices.clone();
     let train_indices = run.train_indices.clone();
-    let outcome = TrainJob::spawn(run.setup, JobOptions::default())
+    let outcome = train(run.setup, JobOptions::default())
         .wait()
         .expect("training finishes");
     let splats = (*outcome.splats).clone();

@@ -10,7 +10,8 @@ use damage_twin::scene::{Camera, Intrinsics, RgbImage};
 use damage_twin::splats::Splats;
 use damage_twin::splats::init::{InitOptions, from_points, random_points};
 use damage_twin::train::evaluate::evaluate_views;
-use damage_twin::train::job::{JobEvent, JobOptions, TrainJob, TrainSetup};
+use damage_twin::train::job::{JobEvent, JobOptions};
+use damage_twin::train::run::{self as run, TrainOutcome, TrainSetup};
 use damage_twin::train::spec::{TrainSpec, TrainView};
 use damage_twin::train::trainer::Trainer;
 
@@ -177,7 +178,7 @@ fn a_nan_step_is_rolled_back_and_training_recovers() {
 fn a_nan_target_pixel_is_reported_as_an_event_and_skipped() {
     let (mut views, heldout) = scene();
     views[3].image.data[100] = f32::NAN;
-    let job = TrainJob::spawn(
+    let job = run::train(
         TrainSetup {
             spec: spec(60, 2),
             splats: initial(),
@@ -212,7 +213,7 @@ fn a_nan_target_pixel_is_reported_as_an_event_and_skipped() {
 #[test]
 fn job_pauses_resumes_and_cancels() {
     let (views, heldout) = scene();
-    let job = TrainJob::spawn(
+    let job = run::train(
         TrainSetup {
             spec: spec(1_000_000, 3),
             splats: initial(),
@@ -227,7 +228,7 @@ fn job_pauses_resumes_and_cancels() {
         },
     );
     let events = job.events().clone();
-    let step_of = |e: &JobEvent| match e {
+    let step_of = |e: &JobEvent<TrainOutcome>| match e {
         JobEvent::Progress(p) => Some(p.step),
         _ => None,
     };

@@ -10,8 +10,7 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender};
 
-use crate::app::damage_layer;
-use crate::app::settings::DamageLayer;
+use crate::damage::layer::DamageLayer;
 use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
 use crate::scene::Camera;
 use crate::splats::Splats;
@@ -151,7 +150,7 @@ fn render_jobs(jobs: &Receiver<Job>, pictures: &Sender<Picture>, ctx: &egui::Con
         let r = &job.request;
         let key = (r.generation, r.splat_scale, r.damage.clone());
         if display.as_ref().is_none_or(|(k, _)| *k != key) {
-            let shown = damage_layer::display_splats(&job.splats, r.splat_scale, &r.damage);
+            let shown = crate::damage::layer::display_splats(&job.splats, r.splat_scale, &r.damage);
             display = Some((key, shown.into_owned()));
         }
         let Some((_, shown)) = &display else {

@@ -3,22 +3,17 @@
 //! files are `scene`. Everything the UI does is a `Command` a headless caller can apply too.
 
 pub mod camera_controller;
-pub mod chart_export;
 pub mod commands;
 pub mod cpu_view;
-pub mod damage_layer;
 pub mod demo;
 pub mod files;
-pub mod history;
 pub mod overlay;
 pub mod panels;
 pub mod resolution;
 pub mod scene_frame;
 pub mod settings;
-pub mod snapshot;
 pub mod splat_view;
 pub mod state;
-pub mod train_setup;
 pub mod training;
 pub mod viewport;
 pub mod workers;
@@ -123,7 +118,7 @@ impl TwinApp {
             Launch::Empty => {}
             Launch::Demo => {
                 app.state.train_on_open = true;
-                app.demo = Some(DemoPreparation::start(demo::cache_dir()));
+                app.demo = Some(DemoPreparation::start(crate::synth::demo::cache_dir()));
             }
             Launch::Open { path, train } => {
                 app.state.train_on_open = train;

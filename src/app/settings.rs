@@ -5,14 +5,18 @@
 use serde::{Deserialize, Serialize};
 
 use crate::app::camera_controller::NavMode;
-use crate::damage::DamageClass;
-use crate::damage::setup::RunConfig;
 
 /// Key under which the settings live in eframe's storage.
 pub const STORAGE_KEY: &str = "damage-twin.settings";
 
 /// What the trainer optimises (issue 7: the viewer picks the mode).
 pub use crate::damage::TrainMode;
+
+/// The damage layer's display settings (`damage::layer`).
+pub use crate::damage::layer::DamageLayer;
+
+/// The training panel's settings (`damage::setup`).
+pub use crate::damage::setup::TrainingSettings;
 
 /// How the photo of a snapped survey view is compared with the render.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -26,7 +30,6 @@ pub enum CompareMode {
     SideBySide,
 }
 
-/// Damage layer display (issue 7 item 3): class colours over the render.
 /// Which renderer draws the splats in the viewport.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 pub enum ViewportRenderer {
@@ -37,58 +40,6 @@ pub enum ViewportRenderer {
     Gpu,
     /// The CPU reference rasterizer on a worker thread.
     Cpu,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct DamageLayer {
-    pub enabled: bool,
-    /// Opacity of the class colours over the photo-real render.
-    pub opacity: f32,
-    /// Show only damage (no photo-real colour).
-    pub damage_only: bool,
-    /// Per class, in `DamageClass::ALL` order: shown or not.
-    pub visible: [bool; 3],
-    /// Per class colour (sRGB), in `DamageClass::ALL` order.
-    pub colours: [[u8; 3]; 3],
-}
-
-impl Default for DamageLayer {
-    fn default() -> Self {
-        DamageLayer {
-            enabled: true,
-            opacity: 0.7,
-            damage_only: false,
-            visible: [true; 3],
-            colours: DamageClass::ALL.map(|c| c.default_colour()),
-        }
-    }
-}
-
-/// Training defaults the training panel starts a job with.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct TrainingSettings {
-    pub iterations: u32,
-    /// Image downscale factor (1, 2, 4 or 8).
-    pub resolution_factor: u32,
-    pub mode: TrainMode,
-    /// Weight of the label BCE loss in label mode.
-    pub label_weight: f32,
-}
-
-impl Default for TrainingSettings {
-    fn default() -> Self {
-        TrainingSettings {
-            iterations: 3000,
-            // A quarter of the 960×540 demo (240×135): at half size the CPU trainer managed about
-            // one step per second on a loaded 2-core machine beside the viewer (measured under
-            // Xvfb); a quarter is 4× cheaper and is the scale of docs/DAMAGE.md's figures.
-            resolution_factor: 4,
-            mode: TrainMode::Label,
-            label_weight: RunConfig::default().label_weight,
-        }
-    }
 }
 
 /// Everything the viewer remembers between runs.
@@ -202,6 +153,15 @@ impl Settings {
         );
         self.recent.truncate(Self::MAX_RECENT);
         self
+    }
+
+    /// How a still of the current view is drawn (export, as displayed).
+    pub fn display_style(&self) -> crate::damage::display::DisplayStyle {
+        crate::damage::display::DisplayStyle {
+            background: glam::Vec3::from_array(self.background),
+            splat_scale: self.splat_scale,
+            damage: self.damage.clone(),
+        }
     }
 
     /// Puts `path` first in the recent list.

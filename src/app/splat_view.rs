@@ -6,7 +6,6 @@ use std::sync::{Arc, Mutex};
 
 use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait, ScreenDescriptor};
 
-use crate::app::damage_layer;
 use crate::app::settings::Settings;
 use crate::gpu::{GpuContext, GpuRenderSettings, GpuRenderer};
 use crate::scene::Camera;
@@ -54,7 +53,7 @@ fn fs_linear(in: VsOut) -> @location(0) vec4<f32> {
 struct UploadKey {
     generation: u64,
     splat_scale: f32,
-    damage: crate::app::settings::DamageLayer,
+    damage: crate::damage::layer::DamageLayer,
 }
 
 /// GPU state kept in egui-wgpu's callback resources (one per app).
@@ -199,7 +198,7 @@ impl CallbackTrait for SplatCallback {
         res.last_render = None;
         let result = (|| -> Result<(), String> {
             if res.uploaded.as_ref() != Some(&self.key) {
-                let shown = damage_layer::display_splats(
+                let shown = crate::damage::layer::display_splats(
                     &self.splats,
                     self.key.splat_scale,
                     &self.key.damage,

@@ -10,14 +10,15 @@ use crossbeam_channel::{Receiver, Sender};
 
 use crate::app::camera_controller::CameraController;
 use crate::app::commands::{Command, DialogKind};
-use crate::app::history::History;
 use crate::app::scene_frame::SceneFrame;
 use crate::app::settings::Settings;
 use crate::app::training::TrainingSession;
 use crate::app::viewport::FrameStats;
-use crate::app::{files, workers};
+use crate::app::workers;
 use crate::scene::{Camera, Dataset, RgbImage};
 use crate::splats::Splats;
+use crate::timeline::Twin;
+use crate::train::history::History;
 
 /// Most log lines kept for the log panel.
 const LOG_LINES: usize = 200;
@@ -285,8 +286,11 @@ impl AppState {
             }
             Command::ExportPly(path) => match &self.splats {
                 Some(splats) => {
-                    let result = files::export_ply(&path, splats);
-                    self.report(result, &format!("exported {}", path.display()));
+                    let result = crate::scene::ply::write_splats(&path, splats);
+                    self.report(
+                        result.map_err(Into::into),
+                        &format!("exported {}", path.display()),
+                    );
                 }
                 None => self.log_line("nothing to export yet: no model"),
             },
@@ -364,12 +368,50 @@ impl AppState {
             .as_ref()
             .and_then(|s| s.dataset.as_ref())
             .map(|d| d.root.clone());
-        let result = files::save_project(dir, dataset_root.as_deref(), &splats, &self.settings);
+        let result = self.save_twin(dir, dataset_root.as_deref(), &splats);
         let ok = result.is_ok();
         self.report(result, &format!("saved the twin to {}", dir.display()));
         if ok && let Some(scene) = &mut self.scene {
             scene.project_dir = Some(dir.to_path_buf());
         }
+    }
+
+    /// The twin project in `dir` with the model on screen saved as its survey's model, the
+    /// damage colours, background and training scale as its settings, and the last finished
+    /// run's figures as that survey's metrics.
+    fn save_twin(
+        &self,
+        dir: &Path,
+        dataset_root: Option<&Path>,
+        splats: &Splats,
+    ) -> anyhow::Result<()> {
+        use crate::scene::project::{ClassStyle, ProjectSettings};
+        let mut twin = Twin::open_or_create(dir)?;
+        twin.project.classes = crate::damage::DamageClass::ALL
+            .iter()
+            .zip(self.settings.damage.colours)
+            .map(|(&class, colour)| ClassStyle { class, colour })
+            .collect();
+        twin.project.settings = ProjectSettings {
+            background: self.settings.background,
+            scale: crate::scene::ImageScale::Factor(self.settings.training.resolution_factor),
+            ..twin.project.settings.clone()
+        };
+        let survey = twin.save_survey_model(dataset_root, splats)?;
+        if let Some(outcome) = self.training.as_ref().and_then(|t| t.outcome.as_ref()) {
+            let metrics = serde_json::json!({
+                "heldout_psnr": outcome.heldout.as_ref().map(|s| s.psnr),
+                "heldout_ssim": outcome.heldout.as_ref().map(|s| s.ssim),
+                "gaussians": outcome.splats.len(),
+                "iterations": outcome.steps,
+                "seconds": outcome.seconds,
+                "mode": self.settings.training.mode,
+                "resolution_factor": self.settings.training.resolution_factor,
+            });
+            twin.save_metrics(&survey, &metrics)?;
+            twin.save()?;
+        }
+        Ok(())
     }
 
     fn snap_to(&mut self, index: usize) {

@@ -7,12 +7,12 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::TryRecvError;
 
-use crate::app::history::{EvalSample, History, Sample};
-use crate::app::settings::TrainingSettings;
-use crate::app::train_setup;
+use crate::damage::setup::{RunConfig, TrainingSettings, train_job};
 use crate::scene::Dataset;
 use crate::splats::Splats;
-use crate::train::job::{JobEvent, JobOptions, Progress, TrainJob, TrainOutcome};
+use crate::train::history::History;
+use crate::train::job::{JobEvent, JobOptions, Progress};
+use crate::train::run::{TrainJob, TrainOutcome};
 
 /// At most this many events are handled per frame, so a flood cannot stall a frame; the rest
 /// wait for the next one.
@@ -75,11 +75,8 @@ impl TrainingSession {
             // must not wait for a training step.
             low_priority: true,
         };
-        let config = train_setup::run_config(&settings, palette, background);
-        let job = TrainJob::spawn_with(
-            move |log| train_setup::setup(&dataset, &config, Some(log)),
-            options,
-        );
+        let config = RunConfig::interactive(&settings, palette, background);
+        let job = train_job(dataset, config, options);
         TrainingSession {
             job: Some(job),
             status: RunStatus::Preparing,
@@ -176,21 +173,9 @@ impl TrainingSession {
                     if self.status == RunStatus::Preparing {
                         self.status = RunStatus::Running;
                     }
-                    let wall_s = self.started.elapsed().as_secs_f64();
-                    history.push(Sample {
-                        wall_s,
-                        step: p.step,
-                        loss: f64::from(p.loss),
-                        psnr: f64::NAN,
-                        gaussians: p.gaussians,
-                    });
-                    if let Some(psnr) = p.psnr {
-                        self.heldout_psnr = Some(psnr);
-                        history.push_eval(EvalSample {
-                            wall_s,
-                            step: p.step,
-                            psnr,
-                        });
+                    history.record_progress(&p, self.started.elapsed().as_secs_f64());
+                    if p.psnr.is_some() {
+                        self.heldout_psnr = p.psnr;
                     }
                     self.progress = Some(p);
                 }
@@ -203,14 +188,10 @@ impl TrainingSession {
                 }
                 JobEvent::Finished(outcome) => {
                     let heldout_psnr = outcome.heldout.as_ref().map(|s| s.psnr);
-                    if let (Some(psnr), Some(p)) = (heldout_psnr, &self.progress) {
-                        self.heldout_psnr = Some(psnr);
-                        history.push_eval(EvalSample {
-                            wall_s: self.started.elapsed().as_secs_f64(),
-                            step: p.step,
-                            psnr,
-                        });
+                    if heldout_psnr.is_some() {
+                        self.heldout_psnr = heldout_psnr;
                     }
+                    history.record_final(heldout_psnr, self.started.elapsed().as_secs_f64());
                     update.log.push(format!(
                         "training {} after {} of {} steps in {:.1} s{}",
                         if outcome.cancelled {
@@ -235,7 +216,7 @@ impl TrainingSession {
                 }
                 JobEvent::Failed(e) => {
                     update.log.push(format!("training failed: {e}"));
-                    self.status = RunStatus::Failed(e);
+                    self.status = RunStatus::Failed(e.to_string());
                 }
             }
         }

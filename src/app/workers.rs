@@ -13,9 +13,9 @@ use crate::app::files::{self, OpenTarget};
 use crate::app::settings::Settings;
 use crate::app::state::WorkerResult;
 use crate::scene::open::OpenOptions;
-use crate::scene::project::Project;
 use crate::scene::{Camera, Dataset, ImageScale, ply};
 use crate::splats::Splats;
+use crate::timeline::Twin;
 
 /// Longest side of a comparison photo: enough for a viewport, cheap to upload.
 const PHOTO_MAX_WIDTH: u32 = 1600;
@@ -61,46 +61,26 @@ pub fn open_blocking(path: &Path) -> anyhow::Result<WorkerResult> {
             })
         }
         OpenTarget::Project(file) => {
-            let project =
-                Project::load(&file).with_context(|| format!("reading {}", file.display()))?;
-            let dir = file.parent().map(Path::to_path_buf).unwrap_or_default();
+            let twin = Twin::open(&file)?;
             // The latest survey is the one the twin shows.
-            let survey = project
-                .surveys
-                .last()
-                .with_context(|| format!("{} has no survey", file.display()))?;
-            let resolve = |p: &Path| {
-                if p.is_absolute() {
-                    p.to_path_buf()
-                } else {
-                    dir.join(p)
-                }
-            };
+            let survey = twin.latest()?.clone();
             let dataset = if survey.dataset.as_os_str().is_empty() {
                 None
             } else {
-                let root = resolve(&survey.dataset);
+                let root = twin.resolve(&survey.dataset);
                 let options = OpenOptions {
-                    background: project.settings.background,
+                    background: twin.project.settings.background,
                 };
                 Some(Arc::new(Dataset::open(&root, &options).with_context(
                     || format!("opening survey {} at {}", survey.name, root.display()),
                 )?))
             };
-            let splats = match &survey.model {
-                Some(model) => {
-                    let model = resolve(model);
-                    Some(Arc::new(ply::read_splats(&model).with_context(|| {
-                        format!("reading the model {}", model.display())
-                    })?))
-                }
-                None => None,
-            };
+            let splats = twin.load_model(&survey.name)?.map(Arc::new);
             Ok(WorkerResult::Opened {
                 source: file,
                 dataset,
                 splats,
-                project_dir: Some(dir),
+                project_dir: Some(twin.dir().to_path_buf()),
             })
         }
     }
@@ -186,7 +166,8 @@ pub fn export_png(
     results: Sender<WorkerResult>,
 ) {
     spawn("damage-twin-png", move || {
-        let line = match crate::app::snapshot::render_png(&path, &splats, &camera, &settings) {
+        let style = settings.display_style();
+        let line = match crate::damage::display::render_png(&path, &splats, &camera, &style) {
             Ok(()) => format!("exported {}", path.display()),
             Err(e) => format!("error: {e:#}"),
         };

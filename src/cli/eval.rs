@@ -1,21 +1,22 @@
 //! `damage-twin eval MODEL.ply DATASET`: PSNR and SSIM of a trained model on the held-out views
-//! (the same rule as `train`), as text or `--json`. Rendering and metrics live in the library.
+//! (the same rule as `train`) and its rendered damage against the reference masks, as text or
+//! `--json`. The evaluation is `damage::assess`.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 
-use anyhow::Context;
 use glam::Vec3;
 use serde::Serialize;
 
-use damage_twin::scene::ImageScale;
-use damage_twin::train::evaluate::evaluate_views;
-use damage_twin::train::views::{load_views, split_views};
-
 use damage_twin::damage::TrainMode;
+use damage_twin::damage::assess::{EvalRequest, ViewScore, evaluate_job};
 use damage_twin::damage::evaluate::{DamageFigures, DamageReadout};
+use damage_twin::scene::ImageScale;
+use damage_twin::train::job::JobOptions;
+use damage_twin::train::views::split_views;
 
-use super::train::{
-    HoldoutArgs, damage_figures, open_dataset, palette, parse_background, parse_scale,
+use super::args::{
+    HoldoutArgs, drive, open_dataset, palette, parse_background, parse_scale, read_model,
 };
 
 #[derive(clap::Args, Debug)]
@@ -46,13 +47,6 @@ pub struct Args {
 }
 
 #[derive(Serialize)]
-struct ViewScore {
-    name: String,
-    psnr: f64,
-    ssim: f64,
-}
-
-#[derive(Serialize)]
 struct Report {
     psnr: f64,
     ssim: f64,
@@ -67,80 +61,58 @@ struct Report {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let splats = damage_twin::scene::ply::read_splats(&args.model)
-        .with_context(|| format!("reading model {}", args.model.display()))?;
-    let dataset = open_dataset(&args.dataset, args.background)?;
+    let splats = Arc::new(read_model(&args.model)?);
+    let dataset = Arc::new(open_dataset(&args.dataset, args.background)?);
     let (_, test_idx) =
         split_views(&dataset, &args.holdout.holdout()).map_err(anyhow::Error::msg)?;
-    if test_idx.is_empty() {
-        anyhow::bail!(
-            "{} has no held-out views under this rule",
-            args.dataset.display()
-        );
-    }
-    let views = load_views(&dataset, &test_idx, args.scale, false)?;
-    let mut per_view = Vec::with_capacity(views.len());
-    for view in &views {
-        let s = evaluate_views(
-            &splats,
-            std::slice::from_ref(view),
-            args.background,
-            splats.sh_degree,
-        )
-        .context("no view to evaluate")?;
-        per_view.push(ViewScore {
-            name: view.name.clone(),
-            psnr: s.psnr,
-            ssim: s.ssim,
-        });
-    }
     let mut readout = DamageReadout::for_model(&splats, palette(&args.colours)?);
     readout.tolerance = args.tolerance;
     if let Some(mode) = args.mode {
         readout.mode = mode;
     }
-    let damage = damage_figures(
-        &dataset,
-        &test_idx,
-        args.scale,
-        &splats,
-        &readout,
-        args.background,
-    )?;
-    let n = per_view.len() as f64;
+    let request = EvalRequest {
+        indices: test_idx,
+        scale: args.scale,
+        background: args.background,
+        sh_degree: splats.sh_degree,
+        photometric: true,
+        readout,
+    };
+    let job = evaluate_job(dataset, splats.clone(), request, JobOptions::headless(None));
+    let scores = drive(job, "evaluation", args.json, |_| {})?;
     let report = Report {
-        psnr: per_view.iter().map(|v| v.psnr).sum::<f64>() / n,
-        ssim: per_view.iter().map(|v| v.ssim).sum::<f64>() / n,
-        views: per_view,
+        psnr: scores.psnr.unwrap_or(f64::NAN),
+        ssim: scores.ssim.unwrap_or(f64::NAN),
+        views: scores.views,
         gaussians: splats.len(),
-        damage_mode: damage.as_ref().map(|_| readout.mode),
-        damage_reference: damage.as_ref().map(|d| d.0.clone()),
-        damage: damage.map(|d| d.1),
+        damage_mode: scores.damage.as_ref().map(|_| readout.mode),
+        damage_reference: scores.damage_reference,
+        damage: scores.damage,
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        for v in &report.views {
-            println!("{:<24} PSNR {:6.2} dB  SSIM {:.4}", v.name, v.psnr, v.ssim);
-        }
+        return Ok(());
+    }
+    for v in &report.views {
+        println!("{:<24} PSNR {:6.2} dB  SSIM {:.4}", v.name, v.psnr, v.ssim);
+    }
+    println!(
+        "held-out mean over {} views: PSNR {:.2} dB, SSIM {:.4} ({} Gaussians)",
+        report.views.len(),
+        report.psnr,
+        report.ssim,
+        report.gaussians
+    );
+    if let (Some(d), Some(mode)) = (&report.damage, report.damage_mode) {
         println!(
-            "held-out mean over {} views: PSNR {:.2} dB, SSIM {:.4} ({} Gaussians)",
-            report.views.len(),
-            report.psnr,
-            report.ssim,
-            report.gaussians
+            "damage ({mode} mode, against {}):",
+            report.damage_reference.as_deref().unwrap_or("-")
         );
-        if let (Some(d), Some(mode)) = (&report.damage, report.damage_mode) {
+        for (class, iou) in &d.iou {
             println!(
-                "damage ({mode} mode, against {}):",
-                report.damage_reference.as_deref().unwrap_or("-")
+                "  {class:<10} IoU {iou:.3}  precision {:.3}  recall {:.3}  F1 {:.3}  ({} reference pixels)",
+                d.precision[class], d.recall[class], d.f1[class], d.reference_pixels[class]
             );
-            for (class, iou) in &d.iou {
-                println!(
-                    "  {class:<10} IoU {iou:.3}  precision {:.3}  recall {:.3}  F1 {:.3}  ({} reference pixels)",
-                    d.precision[class], d.recall[class], d.f1[class], d.reference_pixels[class]
-                );
-            }
         }
     }
     Ok(())

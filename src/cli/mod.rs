@@ -1,11 +1,13 @@
 //! The headless client: parses arguments and drives the library's job API. No algorithms here.
 //! Every subcommand lives in its own file with an `Args` struct and a `run` function.
 
+mod args;
 mod bench;
 mod bench_render;
 mod demo;
 mod eval;
 mod inspect;
+mod launch;
 mod render;
 mod study;
 mod synth;
@@ -56,7 +58,7 @@ pub fn main() -> ExitCode {
     }
     let result = match cli.command {
         // No subcommand: the desktop app on the built-in demo building.
-        None => damage_twin::app::run(damage_twin::app::Launch::Demo),
+        None => launch::demo_window(),
         Some(Command::Inspect(args)) => inspect::run(args),
         Some(Command::Synth(args)) => synth::run(args),
         Some(Command::Train(args)) => train::run(args),

@@ -1,21 +1,21 @@
 //! `damage-twin render MODEL.ply DATASET --view NAME --out FILE.png`: renders a model from one of
 //! the dataset's cameras at a scale and saves the PNG, optionally with the damage layer over it
-//! and the rendered damage masks beside it. Rendering lives in `raster`, reading damage back in
-//! `damage::evaluate`.
+//! and the rendered damage masks beside it. Rendering and read-back are `damage::display`.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 
-use anyhow::{Context, bail};
+use anyhow::bail;
 use glam::Vec3;
 
-use damage_twin::app::settings::{DamageLayer, Settings};
-use damage_twin::app::snapshot;
-use damage_twin::damage::evaluate::{DamageReadout, predicted_masks};
-use damage_twin::damage::{DamageClass, Palette};
-use damage_twin::raster::{RenderSettings, render};
+use damage_twin::damage::Palette;
+use damage_twin::damage::display::{DisplayStyle, RenderRequest, render_job};
+use damage_twin::damage::evaluate::DamageReadout;
+use damage_twin::damage::layer::DamageLayer;
 use damage_twin::scene::ImageScale;
+use damage_twin::train::job::JobOptions;
 
-use super::train::{open_dataset, parse_background, parse_scale};
+use super::args::{drive, open_dataset, parse_background, parse_scale, read_model};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -46,77 +46,63 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let splats = damage_twin::scene::ply::read_splats(&args.model)
-        .with_context(|| format!("reading model {}", args.model.display()))?;
+    let splats = Arc::new(read_model(&args.model)?);
     let dataset = open_dataset(&args.dataset, args.background)?;
-    let wanted = &args.view;
-    let Some(view) = dataset
-        .views
-        .iter()
-        .find(|v| &v.name == wanted || v.name.ends_with(&format!("/{wanted}")))
-    else {
-        let names: Vec<&str> = dataset
-            .views
-            .iter()
-            .take(5)
-            .map(|v| v.name.as_str())
-            .collect();
+    let Some(index) = dataset.view_index(&args.view) else {
         bail!(
-            "no view named {wanted:?} in {} (e.g. {names:?})",
-            args.dataset.display()
+            "no view named {:?} in {} (views are named like {})",
+            args.view,
+            args.dataset.display(),
+            dataset.example_view_names()
         );
     };
+    let view = &dataset.views[index];
     let k = &view.camera.intrinsics;
     let (w, h) = args.scale.apply(k.width, k.height);
-    let camera = view.camera.resized(w, h);
-    let settings = Settings {
-        background: args.background.to_array(),
+    let style = DisplayStyle {
+        background: args.background,
+        splat_scale: 1.0,
         damage: DamageLayer {
             enabled: args.damage_layer || args.damage_only,
             opacity: args.damage_opacity.clamp(0.0, 1.0),
             damage_only: args.damage_only,
             ..DamageLayer::default()
         },
-        ..Settings::default()
     };
-    if settings.damage.enabled && splats.label_channels == 0 {
+    if style.damage.enabled && splats.label_channels == 0 {
         eprintln!(
             "warning: {} has no label channels (not trained in label mode): no damage layer",
             args.model.display()
         );
     }
-    snapshot::render_png(&args.out, &splats, &camera, &settings)
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    if args.masks {
-        let out = render(
-            &splats,
-            &camera,
-            &RenderSettings::new(args.background, splats.sh_degree),
+    let request = RenderRequest {
+        camera: view.camera.resized(w, h),
+        style,
+        out: args.out.clone(),
+        masks: args
+            .masks
+            .then(|| DamageReadout::for_model(&splats, Palette::default())),
+    };
+    let still = drive(
+        render_job(splats, request.clone(), JobOptions::headless(None)),
+        "rendering",
+        true,
+        |_| {},
+    )?;
+    for mask in &still.masks {
+        println!(
+            "wrote {} ({} {} pixels, {} mode)",
+            mask.path.display(),
+            mask.pixels,
+            mask.class,
+            request.masks.map(|r| r.mode).unwrap_or_default()
         );
-        let readout = DamageReadout::for_model(&splats, Palette::default());
-        let stem = args
-            .out
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "render".into());
-        for (class, mask) in DamageClass::ALL.iter().zip(predicted_masks(&out, &readout)) {
-            let path = args.out.with_file_name(format!("{stem}_{class}.png"));
-            damage_twin::scene::load::save_mask_png(&path, &mask)
-                .with_context(|| format!("writing {}", path.display()))?;
-            println!(
-                "wrote {} ({} {} pixels, {} mode)",
-                path.display(),
-                mask.data.iter().filter(|&&v| v != 0).count(),
-                class,
-                readout.mode
-            );
-        }
     }
     println!(
         "wrote {} ({}x{}) from view {}",
-        args.out.display(),
-        w,
-        h,
+        still.path.display(),
+        still.width,
+        still.height,
         view.name
     );
     Ok(())

@@ -16,7 +16,7 @@ use damage_twin::damage::study::{StudyConfig, StudyEvent, StudyRow, run_study};
 use damage_twin::report::study_chart::{study_csv, study_table, write_study_chart};
 use damage_twin::scene::ImageScale;
 
-use super::train::{HoldoutArgs, open_dataset, palette, parse_scale, print_line};
+use super::args::{HoldoutArgs, open_dataset, palette, parse_scale, print_line};
 
 #[derive(clap::Subcommand, Debug)]
 pub enum Study {
@@ -76,7 +76,7 @@ fn write_reports(dir: &std::path::Path, rows: &[StudyRow]) -> anyhow::Result<Vec
     };
     write("study.csv", study_csv(rows))?;
     write("study.md", study_table(rows))?;
-    write_study_chart(dir, "study", rows).map_err(anyhow::Error::msg)
+    Ok(write_study_chart(dir, "study", rows)?)
 }
 
 #[derive(Serialize)]

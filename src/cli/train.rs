@@ -1,25 +1,25 @@
-//! `damage-twin train DATASET --out DIR`: opens a dataset, starts a training job and draws its
-//! progress; writes `model.ply`, `metrics.json` and `curve.csv`. All training happens in the job.
+//! `damage-twin train DATASET --out DIR`: starts a training job on a dataset and draws its
+//! progress; writes `model.ply`, `metrics.json` and `curve.csv`. Training and evaluation happen
+//! in the library (`damage::setup`, `damage::assess`); this file parses and writes.
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::path::PathBuf;
+use std::sync::Arc;
 
-use anyhow::{Context, bail};
-use glam::Vec3;
-use indicatif::{ProgressBar, ProgressStyle};
+use anyhow::Context;
 use serde::Serialize;
 
-use damage_twin::damage::evaluate::{DamageFigures, DamageReadout, evaluate_damage};
-use damage_twin::damage::reference::{load_reference_views, reference_source};
-use damage_twin::damage::setup::{RunConfig, effective_mode, prepare_run};
-use damage_twin::damage::{Palette, TrainMode};
+use damage_twin::damage::TrainMode;
+use damage_twin::damage::assess::{EvalRequest, ModelScores, evaluate_model};
+use damage_twin::damage::evaluate::{DamageFigures, DamageReadout};
+use damage_twin::damage::setup::{RunConfig, effective_mode, train_job};
 use damage_twin::metrics::peak_rss_mb;
-use damage_twin::scene::open::OpenOptions;
-use damage_twin::scene::{Dataset, ImageScale};
-use damage_twin::train::job::{JobEvent, JobOptions, TrainJob};
+use damage_twin::scene::atomic::write_atomic;
+use damage_twin::train::job::JobOptions;
 use damage_twin::train::trainer::StageTimes;
-use damage_twin::train::views::{Holdout, load_views, split_views};
+use damage_twin::train::views::split_views;
+
+use super::args::{RunArgs, drive, open_dataset, palette};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -59,120 +59,6 @@ pub struct Args {
     pub label_lr: f32,
 }
 
-/// How a run reads its dataset and starts: shared by `train` and `bench`, so the two time the
-/// same run.
-#[derive(clap::Args, Debug)]
-pub struct RunArgs {
-    /// Image scale: 1, 2, 4, 8, 0.25 or w<width>.
-    #[arg(long, default_value = "1", value_parser = parse_scale)]
-    pub scale: ImageScale,
-    #[arg(long, default_value_t = 3)]
-    pub sh_degree: u32,
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    #[command(flatten)]
-    pub holdout: HoldoutArgs,
-    /// Background: white, black or r,g,b in [0, 1].
-    #[arg(long, default_value = "black", value_parser = parse_background)]
-    pub background: Vec3,
-    /// Training threads (default: all cores, or RAYON_NUM_THREADS).
-    #[arg(long)]
-    pub threads: Option<usize>,
-    /// Random initial points when the dataset has none (NeRF-synthetic, instant-ngp).
-    #[arg(long, default_value_t = 100_000)]
-    pub init_points: usize,
-}
-
-/// The palette with the user's `--colour` overrides.
-pub fn palette(overrides: &[String]) -> anyhow::Result<Palette> {
-    let mut palette = Palette::default();
-    for text in overrides {
-        palette.set_from_text(text).map_err(anyhow::Error::msg)?;
-    }
-    Ok(palette)
-}
-
-/// Damage figures of `splats` on the views `indices` against the reference masks (`truth/` when
-/// present); None when the dataset has no masks or nothing is evaluated.
-pub fn damage_figures(
-    dataset: &Dataset,
-    indices: &[usize],
-    scale: ImageScale,
-    splats: &damage_twin::splats::Splats,
-    readout: &DamageReadout,
-    background: Vec3,
-) -> anyhow::Result<Option<(String, DamageFigures)>> {
-    let Some(source) = reference_source(dataset) else {
-        return Ok(None);
-    };
-    if indices.is_empty() || readout.mode == TrainMode::Rgb {
-        return Ok(None);
-    }
-    let views = load_reference_views(dataset, &source, indices, scale)?;
-    let scores = evaluate_damage(splats, &views, readout, background);
-    Ok(Some((source.dir().display().to_string(), scores.figures())))
-}
-
-pub fn parse_scale(text: &str) -> Result<ImageScale, String> {
-    ImageScale::parse(text)
-        .ok_or_else(|| format!("bad scale {text:?}: use 1, 2, 4, 8, 0.5, 0.25, 0.125 or w<width>"))
-}
-
-pub fn parse_background(text: &str) -> Result<Vec3, String> {
-    match text {
-        "white" => return Ok(Vec3::ONE),
-        "black" => return Ok(Vec3::ZERO),
-        _ => {}
-    }
-    let parts: Vec<f32> = text
-        .split(',')
-        .map(|p| p.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| format!("bad background {text:?}: use white, black or r,g,b"))?;
-    match parts[..] {
-        [r, g, b] if [r, g, b].iter().all(|v| (0.0..=1.0).contains(v)) => Ok(Vec3::new(r, g, b)),
-        _ => Err(format!(
-            "bad background {text:?}: use white, black or r,g,b in [0, 1]"
-        )),
-    }
-}
-
-/// Which views are held out: the rule `train`, `bench`, `eval` and `study` share.
-#[derive(clap::Args, Debug)]
-pub struct HoldoutArgs {
-    /// Hold out every n-th view (when the dataset has no test split).
-    #[arg(long, default_value_t = 8)]
-    pub test_every: usize,
-    /// Hold out exactly these views (comma-separated names, e.g. 0049).
-    #[arg(long, value_delimiter = ',')]
-    pub test_views: Vec<String>,
-}
-
-impl HoldoutArgs {
-    pub fn holdout(&self) -> Holdout {
-        if self.test_views.is_empty() {
-            Holdout::Auto {
-                every: self.test_every,
-            }
-        } else {
-            Holdout::Named(self.test_views.clone())
-        }
-    }
-}
-
-/// Opens a dataset with its images composited on `background`.
-pub fn open_dataset(path: &Path, background: Vec3) -> anyhow::Result<Dataset> {
-    let options = OpenOptions {
-        background: background.to_array(),
-    };
-    let dataset = Dataset::open(path, &options)
-        .with_context(|| format!("opening dataset {}", path.display()))?;
-    if dataset.views.is_empty() {
-        bail!("{} has no usable views", path.display());
-    }
-    Ok(dataset)
-}
-
 #[derive(Serialize)]
 struct Metrics {
     psnr: Option<f64>,
@@ -201,42 +87,29 @@ struct Metrics {
     damage_reference: Option<String>,
 }
 
-/// A log line above the bar, or on stderr when the bar is hidden (`println` of a hidden bar
-/// prints nothing).
-fn log_line(bar: &ProgressBar, quiet: bool, line: String) {
-    if quiet {
-        eprintln!("{line}");
-    } else {
-        print_line(bar, line);
-    }
-}
-
-/// A line above a progress bar, or on stderr when the bar is hidden (stderr is not a terminal:
-/// indicatif's `println` then prints nothing).
-pub fn print_line(bar: &ProgressBar, line: String) {
-    if bar.is_hidden() {
-        eprintln!("{line}");
-    } else {
-        bar.println(line);
-    }
+/// Writes `text` to `path` atomically.
+fn write_text(path: &std::path::Path, text: &str) -> anyhow::Result<()> {
+    write_atomic(path, |w| w.write_all(text.as_bytes()))
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let dataset = open_dataset(&args.dataset, args.run.background)?;
-    for warning in &dataset.warnings {
-        eprintln!("warning: {warning}");
-    }
-    let (train_idx, test_idx) =
-        split_views(&dataset, &args.run.holdout.holdout()).map_err(anyhow::Error::msg)?;
+    let dataset = Arc::new(open_dataset(&args.dataset, args.run.background)?);
+    let holdout = args.run.holdout.holdout();
+    let (train_idx, test_idx) = split_views(&dataset, &holdout).map_err(anyhow::Error::msg)?;
+    // Fail on an unwritable output folder now, not after the whole run.
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output folder {}", args.out.display()))?;
+    write_text(&args.out.join(".damage-twin-write-check"), "")?;
+    let _ = std::fs::remove_file(args.out.join(".damage-twin-write-check"));
 
+    let palette = palette(&args.colours)?;
     let config = RunConfig {
         mode: args.mode,
-        palette: palette(&args.colours)?,
+        palette,
         scale: args.run.scale,
         iterations: args.iters,
-        holdout: args.run.holdout.holdout(),
+        holdout,
         sh_degree: args.run.sh_degree,
         seed: args.run.seed,
         background: args.run.background,
@@ -248,152 +121,84 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_gaussians: args.max_gaussians,
     };
     let mode = effective_mode(&dataset, args.mode);
-    let heldout_names: Vec<String> = test_idx
-        .iter()
-        .map(|&i| dataset.views[i].name.clone())
-        .collect();
     let threads = args.run.threads.unwrap_or_else(rayon::current_num_threads);
+    let job = train_job(
+        dataset.clone(),
+        config,
+        JobOptions::headless(args.run.threads),
+    );
 
-    let load_dataset = dataset.clone();
-    let job = TrainJob::spawn_with(
-        move |events| {
-            let run = prepare_run(&load_dataset, &config)?;
-            for note in run.notes {
-                let _ = events.send(JobEvent::Log(note));
-            }
-            Ok(run.setup)
-        },
-        JobOptions {
-            threads: args.run.threads,
-            snapshot_interval: None,
-            low_priority: false,
-        },
-    );
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(args.iters as u64)
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{bar:30} {pos}/{len} {per_sec} ETA {eta} | {msg}")
-            .map_err(anyhow::Error::msg)?,
-    );
-    bar.enable_steady_tick(Duration::from_millis(250));
-    let curve_path = args.out.join("curve.csv");
-    let mut curve = std::io::BufWriter::new(
-        std::fs::File::create(&curve_path)
-            .with_context(|| format!("creating {}", curve_path.display()))?,
-    );
-    writeln!(curve, "step,seconds,loss,gaussians,heldout_psnr")?;
-    let mut last_psnr: Option<f64> = None;
-    let mut outcome = None;
-    for event in job.events().iter() {
-        match event {
-            JobEvent::Progress(p) => {
-                if p.psnr.is_some() {
-                    last_psnr = p.psnr;
-                }
-                if p.psnr.is_some() || p.step % 10 == 0 || p.step == 1 {
-                    let psnr = p.psnr.map(|v| format!("{v:.3}")).unwrap_or_default();
-                    writeln!(
-                        curve,
-                        "{},{:.3},{:.6},{},{}",
-                        p.step,
-                        p.elapsed.as_secs_f64(),
-                        p.loss,
-                        p.gaussians,
-                        psnr
-                    )?;
-                }
-                bar.set_position(p.step as u64);
-                bar.set_message(format!(
-                    "loss {:.4} | held-out PSNR {} | {} Gaussians",
-                    p.loss,
-                    last_psnr
-                        .map(|v| format!("{v:.2} dB"))
-                        .unwrap_or_else(|| "-".into()),
-                    p.gaussians
-                ));
-            }
-            JobEvent::Log(line) => log_line(&bar, args.quiet, line),
-            JobEvent::NanRolledBack { step, reason } => log_line(
-                &bar,
-                args.quiet,
-                format!("step {step}: rolled back ({reason})"),
-            ),
-            JobEvent::Snapshot(_) => {}
-            JobEvent::Finished(o) => outcome = Some(Ok(o)),
-            JobEvent::Failed(e) => outcome = Some(Err(e)),
+    // The learning curve, kept in memory and written with the other outputs at the end, so a
+    // failed or killed run never leaves an emptied curve.csv behind.
+    let mut curve = String::from("step,seconds,loss,gaussians,heldout_psnr\n");
+    let outcome = drive(job, "training", args.quiet, |p| {
+        if p.psnr.is_some() || p.step % 10 == 0 || p.step == 1 {
+            let psnr = p.psnr.map(|v| format!("{v:.3}")).unwrap_or_default();
+            curve.push_str(&format!(
+                "{},{:.3},{:.6},{},{}\n",
+                p.step,
+                p.elapsed.as_secs_f64(),
+                p.loss,
+                p.gaussians,
+                psnr
+            ));
         }
-    }
-    bar.finish_and_clear();
-    let outcome = match outcome {
-        Some(Ok(o)) => o,
-        Some(Err(e)) => bail!("training failed: {e}"),
-        None => bail!("the training job ended without a result"),
-    };
-
-    // Final rows, then the model and the metrics.
+    })?;
     if let Some(scores) = &outcome.heldout {
-        writeln!(
-            curve,
-            "{},{:.3},,{},{:.3}",
+        curve.push_str(&format!(
+            "{},{:.3},,{},{:.3}\n",
             outcome.steps,
             outcome.seconds,
             outcome.splats.len(),
             scores.psnr
-        )?;
+        ));
     }
-    curve.flush()?;
-    let model_path = args.out.join("model.ply");
-    damage_twin::scene::ply::write_splats(&model_path, &outcome.splats)
-        .with_context(|| format!("writing {}", model_path.display()))?;
-
     let peak_rss = peak_rss_mb();
-    // Training-view PSNR on the final model (views reloaded: the job owned the first copies).
-    let train_views = load_views(&dataset, &train_idx, args.run.scale, false)?;
-    let train_psnr = damage_twin::train::evaluate::evaluate_views(
-        &outcome.splats,
-        &train_views,
-        args.run.background,
-        args.run.sh_degree,
-    )
-    .map(|s| s.psnr);
-    let readout = DamageReadout {
-        mode,
-        ..DamageReadout::for_model(&outcome.splats, palette(&args.colours)?)
+
+    // Scores of the final model: image quality on the training views, damage on both sets. The
+    // held-out PSNR is the job's (in overlay mode against the photos with damage painted on).
+    let request = |indices: &[usize], photometric: bool| EvalRequest {
+        indices: indices.to_vec(),
+        scale: args.run.scale,
+        background: args.run.background,
+        sh_degree: args.run.sh_degree,
+        photometric,
+        readout: DamageReadout {
+            mode,
+            ..DamageReadout::for_model(&outcome.splats, palette)
+        },
     };
-    let damage = damage_figures(
+    let train_scores = evaluate_model(
         &dataset,
-        &test_idx,
-        args.run.scale,
         &outcome.splats,
-        &readout,
-        args.run.background,
+        &request(&train_idx, true),
+        &mut |_, _| {},
     )?;
-    let damage_train = damage_figures(
+    let heldout_scores: ModelScores = evaluate_model(
         &dataset,
-        &train_idx,
-        args.run.scale,
         &outcome.splats,
-        &readout,
-        args.run.background,
+        &request(&test_idx, false),
+        &mut |_, _| {},
     )?;
-    let (width, height) = train_views
-        .first()
-        .map(|v| (v.image.width, v.image.height))
-        .unwrap_or((0, 0));
+
+    let (width, height) = args.run.scale.apply(
+        dataset.views[train_idx[0]].camera.intrinsics.width,
+        dataset.views[train_idx[0]].camera.intrinsics.height,
+    );
     let steps = outcome.steps.max(1) as f64;
     let metrics = Metrics {
         psnr: outcome.heldout.as_ref().map(|s| s.psnr),
         ssim: outcome.heldout.as_ref().map(|s| s.ssim),
-        train_psnr,
+        train_psnr: train_scores.psnr,
         gaussians: outcome.splats.len(),
         iterations: outcome.steps,
         seconds: outcome.seconds,
         ms_per_iteration: outcome.seconds * 1000.0 / steps,
         peak_rss_mb: peak_rss,
-        heldout_views: heldout_names,
+        heldout_views: test_idx
+            .iter()
+            .map(|&i| dataset.views[i].name.clone())
+            .collect(),
         train_views: train_idx.len(),
         width,
         height,
@@ -403,16 +208,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         cancelled: outcome.cancelled,
         stage_ms_per_iteration: outcome.timings.per_step_ms(outcome.steps),
         mode,
-        damage_reference: damage
-            .as_ref()
-            .or(damage_train.as_ref())
-            .map(|d| d.0.clone()),
-        damage: damage.map(|d| d.1),
-        damage_train: damage_train.map(|d| d.1),
+        damage_reference: heldout_scores
+            .damage_reference
+            .clone()
+            .or(train_scores.damage_reference.clone()),
+        damage: heldout_scores.damage,
+        damage_train: train_scores.damage,
     };
-    let metrics_path = args.out.join("metrics.json");
-    std::fs::write(&metrics_path, serde_json::to_string_pretty(&metrics)?)
-        .with_context(|| format!("writing {}", metrics_path.display()))?;
-    println!("{}", serde_json::to_string_pretty(&metrics)?);
+
+    // The model first, the metrics last: metrics.json always describes the model beside it.
+    let model_path = args.out.join("model.ply");
+    damage_twin::scene::ply::write_splats(&model_path, &outcome.splats)
+        .with_context(|| format!("writing {}", model_path.display()))?;
+    write_text(&args.out.join("curve.csv"), &curve)?;
+    let json = serde_json::to_string_pretty(&metrics)?;
+    write_text(&args.out.join("metrics.json"), &json)?;
+    println!("{json}");
     Ok(())
 }

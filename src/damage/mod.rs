@@ -2,7 +2,11 @@
 //! rendered damage back and scoring it, and the mask-noise study. Uses the engine; contains no
 //! rendering or optimisation of its own.
 
+pub mod assess;
+pub mod bench;
+pub mod display;
 pub mod evaluate;
+pub mod layer;
 pub mod mode;
 pub mod overlay;
 pub mod palette;

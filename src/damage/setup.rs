@@ -3,15 +3,50 @@
 //! label masks) and initial Gaussians. The CLI, the viewer, the headless demo and the mask-noise
 //! study all start their runs here, so the same settings give the same run everywhere.
 
+use std::sync::Arc;
+
 use glam::Vec3;
+use serde::{Deserialize, Serialize};
 
 use crate::damage::overlay::paint_overlay;
 use crate::damage::{DamageClass, Palette, TrainMode};
 use crate::scene::{Dataset, ImageScale};
 use crate::splats::Splats;
-use crate::train::job::TrainSetup;
+use crate::train::job::{JobContext, JobError, JobOptions};
+use crate::train::run::{TrainJob, TrainSetup, train_with};
 use crate::train::spec::{DensifyPolicy, TrainSpec, TrainView};
 use crate::train::views::{Holdout, InitialModel, initial_splats, load_views, split_views};
+
+/// Random initial points of an interactive run when the dataset has none (3DGS uses 100k for
+/// NeRF-synthetic; a few thousand converge faster on a CPU and densification adds the rest).
+const INTERACTIVE_RANDOM_POINTS: usize = 5_000;
+
+/// The few training settings the viewer exposes (its training panel; persisted with its
+/// settings). `RunConfig::interactive` turns them into a run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TrainingSettings {
+    pub iterations: u32,
+    /// Image downscale factor (1, 2, 4 or 8).
+    pub resolution_factor: u32,
+    pub mode: TrainMode,
+    /// Weight of the label BCE loss in label mode.
+    pub label_weight: f32,
+}
+
+impl Default for TrainingSettings {
+    fn default() -> Self {
+        TrainingSettings {
+            iterations: 3000,
+            // A quarter of the 960×540 demo (240×135): at half size the CPU trainer managed about
+            // one step per second on a loaded 2-core machine beside the viewer (measured under
+            // Xvfb); a quarter is 4× cheaper and is the scale of docs/DAMAGE.md's figures.
+            resolution_factor: 4,
+            mode: TrainMode::Label,
+            label_weight: RunConfig::default().label_weight,
+        }
+    }
+}
 
 /// Everything that defines a run besides the dataset.
 #[derive(Clone, Debug, PartialEq)]
@@ -63,6 +98,45 @@ impl Default for RunConfig {
     }
 }
 
+impl RunConfig {
+    /// The run the viewer's training settings describe (and the headless demo, which runs what
+    /// the viewer runs): every-8th held-out rule, ten held-out evaluations for the PSNR chart,
+    /// the damage layer's colours as the overlay palette.
+    pub fn interactive(
+        settings: &TrainingSettings,
+        palette: Palette,
+        background: [f32; 3],
+    ) -> RunConfig {
+        RunConfig {
+            mode: settings.mode,
+            palette,
+            scale: ImageScale::Factor(settings.resolution_factor.max(1)),
+            iterations: settings.iterations.max(1),
+            holdout: Holdout::Auto { every: 8 },
+            background: Vec3::from_array(background),
+            label_weight: settings.label_weight,
+            random_points: INTERACTIVE_RANDOM_POINTS,
+            eval_every: (settings.iterations / 10).max(1),
+            ..RunConfig::default()
+        }
+    }
+}
+
+/// Starts training `config` on `dataset`: the views are loaded and the model initialised on the
+/// worker, and what was decided on the way (mode fallback, counts) goes to the job's log.
+pub fn train_job(dataset: Arc<Dataset>, config: RunConfig, options: JobOptions) -> TrainJob {
+    train_with(
+        move |ctx: &mut JobContext| {
+            let run = prepare_run(&dataset, &config)?;
+            for note in run.notes {
+                ctx.log(note);
+            }
+            Ok(run.setup)
+        },
+        options,
+    )
+}
+
 /// A prepared run and what was decided on the way.
 pub struct PreparedRun {
     pub setup: TrainSetup,
@@ -86,7 +160,7 @@ pub fn effective_mode(dataset: &Dataset, mode: TrainMode) -> TrainMode {
 }
 
 /// Loads the views and builds the initial model and spec for `config` on `dataset`.
-pub fn prepare_run(dataset: &Dataset, config: &RunConfig) -> Result<PreparedRun, String> {
+pub fn prepare_run(dataset: &Dataset, config: &RunConfig) -> Result<PreparedRun, JobError> {
     let mut notes = Vec::new();
     let mode = effective_mode(dataset, config.mode);
     if mode != config.mode {
@@ -96,12 +170,11 @@ pub fn prepare_run(dataset: &Dataset, config: &RunConfig) -> Result<PreparedRun,
             config.mode
         ));
     }
-    let (train_indices, heldout_indices) = split_views(dataset, &config.holdout)?;
+    let (train_indices, heldout_indices) =
+        split_views(dataset, &config.holdout).map_err(JobError::Invalid)?;
     let labels = mode.uses_masks();
-    let mut views =
-        load_views(dataset, &train_indices, config.scale, labels).map_err(|e| e.to_string())?;
-    let mut heldout =
-        load_views(dataset, &heldout_indices, config.scale, labels).map_err(|e| e.to_string())?;
+    let mut views = load_views(dataset, &train_indices, config.scale, labels)?;
+    let mut heldout = load_views(dataset, &heldout_indices, config.scale, labels)?;
     apply_mode(&mut views, mode, &config.palette);
     apply_mode(&mut heldout, mode, &config.palette);
 
@@ -135,7 +208,7 @@ pub fn model_and_spec(
     views: &[TrainView],
     config: &RunConfig,
     mode: TrainMode,
-) -> Result<(Splats, TrainSpec), String> {
+) -> Result<(Splats, TrainSpec), JobError> {
     let label_channels = if mode == TrainMode::Label {
         DamageClass::ALL.len()
     } else {
@@ -147,10 +220,8 @@ pub fn model_and_spec(
         random_points: config.random_points,
         seed: config.seed,
     };
-    let splats =
-        initial_splats(dataset, views, &init).map_err(|e| format!("initial Gaussians: {e}"))?;
+    let splats = initial_splats(dataset, views, &init)?;
     let mut spec = TrainSpec::reconstruction(config.iterations.max(1));
-    spec.scale = config.scale;
     spec.sh_degree = config.sh_degree;
     spec.seed = config.seed;
     spec.background = config.background;

@@ -20,7 +20,8 @@ use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
 use crate::scene::masks::resize_mask_nearest;
 use crate::scene::{Dataset, Mask};
 use crate::synth::corrupt::{corrupt_class_mask, noisy_views};
-use crate::train::job::{JobEvent, JobOptions, TrainJob, TrainSetup};
+use crate::train::job::{JobEvent, JobOptions};
+use crate::train::run::{TrainSetup, train};
 use crate::train::spec::TrainView;
 use crate::train::views::{load_views, split_views};
 
@@ -152,37 +153,29 @@ pub fn run_study(
                 mode,
                 ..config.run.clone()
             };
-            let (splats, spec) = model_and_spec(dataset, &views, &run_config, mode)?;
-            let job = TrainJob::spawn(
+            let (splats, spec) =
+                model_and_spec(dataset, &views, &run_config, mode).map_err(|e| e.to_string())?;
+            let job = train(
                 TrainSetup {
                     spec,
                     splats,
                     views,
                     heldout: Vec::new(),
                 },
-                JobOptions {
-                    threads: config.threads,
-                    snapshot_interval: None,
-                    low_priority: false,
-                },
+                JobOptions::headless(config.threads),
             );
-            let mut outcome = None;
-            for event in job.events().iter() {
-                match event {
-                    JobEvent::Progress(p) if p.step % 50 == 0 || p.step == p.total => {
+            let outcome = job
+                .wait_with(|event| {
+                    if let JobEvent::Progress(p) = event
+                        && (p.step % 50 == 0 || p.step == p.total)
+                    {
                         on_event(StudyEvent::Step {
                             run,
                             step: p.step,
                             total: p.total,
                         })
                     }
-                    JobEvent::Finished(o) => outcome = Some(Ok(o)),
-                    JobEvent::Failed(e) => outcome = Some(Err(e)),
-                    _ => {}
-                }
-            }
-            let outcome = outcome
-                .unwrap_or_else(|| Err("the training job ended without a result".into()))
+                })
                 .map_err(|e| format!("{mode} mode at rate {rate}: {e}"))?;
             let readout = DamageReadout {
                 mode,

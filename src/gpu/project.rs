@@ -25,7 +25,7 @@ pub const TILE_SIZE: u32 = 16;
 /// Near plane: Gaussians whose camera-space depth is not above it are culled (gsplat's 0.01).
 pub const NEAR_PLANE: f32 = 0.01;
 /// Most label channels the kernels blend (a private array in the rasterizer).
-pub const MAX_LABELS: usize = 8;
+pub const MAX_LABELS: usize = crate::splats::MAX_LABEL_CHANNELS;
 
 /// Per-frame uniforms, byte for byte `Uniforms` in `shaders/common.wgsl`.
 #[repr(C)]

@@ -3,6 +3,7 @@
 //! segments each intersection can touch) → rasterize forward; rasterize backward (replaying what
 //! the forward stored in the segment store) → project backward. It must not know about files, losses or optimisers.
 
+mod backend;
 mod bin;
 mod fast_exp;
 mod forward;
@@ -22,6 +23,7 @@ use glam::{Vec2, Vec3, Vec4};
 use crate::scene::Camera;
 use crate::splats::Splats;
 
+pub use backend::RasterBackend;
 pub use bin::{tile_grid, tile_rect};
 
 /// Tile edge in pixels (gsplat, 3DGS).
@@ -32,8 +34,9 @@ pub(crate) const TILE_PIXELS: usize = (TILE_SIZE * TILE_SIZE) as usize;
 pub const NEAR_PLANE: f32 = 0.01;
 /// Far plane (gsplat's default 1e10).
 pub const FAR_PLANE: f32 = 1e10;
-/// Most label channels the rasterizer blends (its per-tile scratch lives on the stack).
-pub const MAX_LABEL_CHANNELS: usize = 16;
+/// Most label channels the rasterizer blends (its per-tile scratch lives on the stack): the
+/// model's one limit, which the PLY reader enforces.
+pub const MAX_LABEL_CHANNELS: usize = crate::splats::MAX_LABEL_CHANNELS;
 /// Default of [`RenderSettings::alpha_threshold`] (3DGS: 1/255).
 pub const ALPHA_THRESHOLD: f32 = 1.0 / 255.0;
 /// A pixel is finished once its transmittance would fall to this (3DGS, gsplat).

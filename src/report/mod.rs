@@ -1,3 +1,24 @@
-//! Reports: charts and tables of measured results, as files. Presentation only.
+//! Reports: charts and tables of measured results, as files. Presentation only: every figure
+//! arrives computed; nothing here renders a model or trains.
 
 pub mod study_chart;
+pub mod training_chart;
+
+use std::path::{Path, PathBuf};
+
+/// A chart that could not be drawn or written.
+#[derive(Debug, thiserror::Error)]
+#[error("drawing {}: {message}", path.display())]
+pub struct ChartError {
+    pub path: PathBuf,
+    pub message: String,
+}
+
+impl ChartError {
+    pub(crate) fn new(path: &Path, error: impl std::fmt::Display) -> ChartError {
+        ChartError {
+            path: path.to_path_buf(),
+            message: error.to_string(),
+        }
+    }
+}

@@ -10,6 +10,7 @@ use plotters::prelude::*;
 
 use crate::damage::study::StudyRow;
 use crate::damage::{DamageClass, TrainMode};
+use crate::report::ChartError;
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
@@ -254,7 +255,7 @@ pub fn write_study_chart(
     dir: &Path,
     stem: &str,
     rows: &[StudyRow],
-) -> Result<Vec<PathBuf>, String> {
+) -> Result<Vec<PathBuf>, ChartError> {
     let width = 520 * classes(rows).len().max(1) as u32;
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
@@ -262,12 +263,12 @@ pub fn write_study_chart(
         BitMapBackend::new(&png, (width, 1000)).into_drawing_area(),
         rows,
     )
-    .map_err(|e| format!("drawing {}: {e}", png.display()))?;
+    .map_err(|e| ChartError::new(&png, e))?;
     draw(
         SVGBackend::new(&svg, (width, 1000)).into_drawing_area(),
         rows,
     )
-    .map_err(|e| format!("drawing {}: {e}", svg.display()))?;
+    .map_err(|e| ChartError::new(&svg, e))?;
     Ok(vec![png, svg])
 }
 

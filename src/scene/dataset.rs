@@ -94,3 +94,19 @@ pub struct LoadedView {
     /// Damage masks present for this view (nearest-neighbour resized to the image).
     pub masks: BTreeMap<DamageClass, Mask>,
 }
+
+impl Dataset {
+    /// The index of the view named `name`: its full name (`images/0049.jpg`'s stem path) or the
+    /// last part of it (`0049`).
+    pub fn view_index(&self, name: &str) -> Option<usize> {
+        self.views
+            .iter()
+            .position(|v| v.name == name || v.name.ends_with(&format!("/{name}")))
+    }
+
+    /// A few view names, for an error message saying what names look like.
+    pub fn example_view_names(&self) -> String {
+        let names: Vec<&str> = self.views.iter().take(4).map(|v| v.name.as_str()).collect();
+        names.join(", ")
+    }
+}

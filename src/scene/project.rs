@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::scene::{DamageClass, NEW_DAMAGE_COLOUR};
 use crate::scene::atomic::write_atomic;
+use crate::scene::{DamageClass, NEW_DAMAGE_COLOUR};
 use crate::scene::{ImageScale, SceneError};
 
 /// The newest `twin.ron` format this program reads and the one it writes.

@@ -115,11 +115,7 @@ pub fn from_points(
             colours: colours.len(),
         });
     }
-    if let Some((index, p)) = positions
-        .iter()
-        .enumerate()
-        .find(|(_, p)| !p.is_finite())
-    {
+    if let Some((index, p)) = positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
         return Err(InitError::NonFinite {
             index,
             position: p.to_array(),

@@ -5,4 +5,4 @@ pub mod init;
 pub mod model;
 pub mod sh;
 
-pub use model::{SplatMeta, Splats};
+pub use model::{MAX_LABEL_CHANNELS, SplatMeta, Splats};

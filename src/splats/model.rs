@@ -35,6 +35,11 @@ pub struct Splats {
     pub meta: SplatMeta,
 }
 
+/// Most damage label channels a model may carry: the one limit every layer shares (the PLY
+/// reader refuses more; the CPU rasterizer's per-tile scratch, the trainer's loss and the GPU
+/// kernels are sized for it). Three classes are used; eight leaves room for user classes.
+pub const MAX_LABEL_CHANNELS: usize = 8;
+
 /// SH coefficients per colour channel for a degree.
 pub const fn sh_coeffs_for_degree(degree: u32) -> usize {
     ((degree + 1) * (degree + 1)) as usize
@@ -150,6 +155,12 @@ impl Splats {
     /// Checks that every array has the length the Gaussian count implies.
     pub fn check_lengths(&self) -> Result<(), String> {
         let n = self.len();
+        if self.label_channels > MAX_LABEL_CHANNELS {
+            return Err(format!(
+                "{} label channels; at most {MAX_LABEL_CHANNELS} are supported",
+                self.label_channels
+            ));
+        }
         let checks = [
             ("log_scales", self.log_scales.len(), n),
             ("rotations", self.rotations.len(), n),

@@ -18,8 +18,8 @@ use super::noise::{hash3, seed32};
 use super::params::{SurveyOutput, SynthError, SynthOutput, SynthParams};
 use super::render::{SceneContext, ViewRender, render_view};
 use super::write;
-use crate::scene::DamageClass;
 use crate::scene::Camera;
+use crate::scene::DamageClass;
 use crate::scene::colmap::{ColmapCamera, ColmapImage, ColmapModel, ColmapPoint, write_text};
 
 /// The scene shared by both surveys.

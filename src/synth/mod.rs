@@ -6,6 +6,7 @@ pub mod building;
 pub mod corrupt;
 pub mod cracks;
 pub mod damage;
+pub mod demo;
 pub mod drone;
 pub mod generate;
 pub mod geometry;

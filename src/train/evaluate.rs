@@ -5,7 +5,7 @@ use glam::Vec3;
 use serde::Serialize;
 
 use crate::metrics::psnr;
-use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
+use crate::raster::{RasterBackend, Rasterizer, RenderOutput, RenderSettings};
 use crate::splats::Splats;
 use crate::train::spec::TrainView;
 
@@ -20,7 +20,7 @@ pub struct EvalScores {
 
 /// Renders every view and averages PSNR and SSIM.
 pub(crate) fn evaluate_with(
-    rasterizer: &mut Rasterizer,
+    rasterizer: &mut dyn RasterBackend,
     out: &mut RenderOutput,
     splats: &Splats,
     views: &[TrainView],
@@ -58,7 +58,7 @@ pub fn evaluate_views(
     let mut rasterizer = Rasterizer::new();
     let mut out = RenderOutput::default();
     Some(evaluate_with(
-        &mut rasterizer,
+        &mut rasterizer as &mut dyn RasterBackend,
         &mut out,
         splats,
         views,

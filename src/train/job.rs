@@ -1,5 +1,6 @@
-//! The job API (DESIGN.md): a training run on a worker thread that reports progress, `Arc`
-//! snapshots, log lines and one final result over a crossbeam channel, and obeys pause / resume /
+//! The job API (DESIGN.md): one step of the pipeline (train, evaluate, render, bench; refine,
+//! detect and update next) on a worker thread that reports progress, `Arc` snapshots, log lines
+//! and one final result or typed error over a crossbeam channel, and obeys pause / resume /
 //! cancel sent the other way. The app and the CLI are clients of this; no algorithm lives here.
 
 use std::sync::Arc;
@@ -8,60 +9,73 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender, TryRecvError};
 
+use crate::scene::SceneError;
 use crate::splats::Splats;
-use crate::train::evaluate::EvalScores;
+use crate::splats::init::InitError;
 use crate::train::priority;
-use crate::train::spec::{TrainSpec, TrainView};
-use crate::train::trainer::{StageTimes, Trainer};
+use crate::train::trainer::TrainError;
 
-/// One progress report, sent after every step.
+/// One progress report.
 #[derive(Clone, Debug)]
 pub struct Progress {
-    /// Steps done so far (1-based after the first step).
+    /// What the job is doing (`"train"`, `"evaluate"`, `"select"`, …).
+    pub phase: &'static str,
+    /// Steps of this phase done so far (1-based after the first step).
     pub step: u32,
     pub total: u32,
-    /// Loss of the last step (NaN when the step was rolled back).
+    /// Loss of the last training step (NaN when the step was rolled back or the phase does not
+    /// train).
     pub loss: f32,
     /// Held-out PSNR, present on the steps where the held-out views were evaluated.
     pub psnr: Option<f64>,
     pub gaussians: usize,
-    /// Training time, pauses excluded.
+    /// Working time of the phase, pauses excluded.
     pub elapsed: Duration,
     /// Remaining time at the current rate.
     pub eta: Duration,
 }
 
-/// What a finished (or cancelled) run leaves.
-#[derive(Clone, Debug)]
-pub struct TrainOutcome {
-    pub splats: Arc<Splats>,
-    pub steps: u32,
-    pub total: u32,
-    pub cancelled: bool,
-    /// Training time, pauses excluded, held-out evaluations included.
-    pub seconds: f64,
-    /// Held-out scores of the final model (None when no held-out views were given).
-    pub heldout: Option<EvalScores>,
-    /// Steps whose NaN/Inf was rolled back.
-    pub rolled_back: u32,
-    /// Accumulated time per stage over the run.
-    pub timings: StageTimes,
+/// Why a job failed.
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Train(#[from] TrainError),
+    #[error("initial Gaussians: {0}")]
+    Init(#[from] InitError),
+    /// A request that cannot run as asked (no held-out views to evaluate, …).
+    #[error("{0}")]
+    Invalid(String),
+    /// An error of a layer above `train` (damage, timeline, report).
+    #[error(transparent)]
+    Other(Box<dyn std::error::Error + Send + Sync>),
+    #[error("cannot start the job: {0}")]
+    Start(String),
+    #[error("the job's worker stopped without a result (it panicked)")]
+    NoResult,
+}
+
+impl JobError {
+    pub fn other(error: impl std::error::Error + Send + Sync + 'static) -> JobError {
+        JobError::Other(Box::new(error))
+    }
 }
 
 /// Events from the worker, in order; `Finished` or `Failed` is always the last one.
-#[derive(Clone, Debug)]
-pub enum JobEvent {
+#[derive(Debug)]
+pub enum JobEvent<R> {
     Progress(Progress),
     /// The current model, at most every `JobOptions::snapshot_interval` and once at the end.
     Snapshot(Arc<Splats>),
     Log(String),
-    /// A step produced NaN or Inf and was undone; training continues.
+    /// A training step produced NaN or Inf and was undone; training continues.
     NanRolledBack {
         step: u32,
         reason: String,
     },
-    Finished(TrainOutcome),
-    Failed(String),
+    Finished(R),
+    Failed(JobError),
 }
 
 /// Control messages from the client.
@@ -72,26 +86,16 @@ pub enum Control {
     Cancel,
 }
 
-/// What the worker trains: built on the worker thread by the setup closure (so that loading a
-/// dataset does not block the caller).
-pub struct TrainSetup {
-    pub spec: TrainSpec,
-    pub splats: Splats,
-    pub views: Vec<TrainView>,
-    /// Held-out views for PSNR during and after training (may be empty).
-    pub heldout: Vec<TrainView>,
-}
-
-/// How the job runs (not what it trains).
+/// How a job runs (not what it does).
 #[derive(Clone, Copy, Debug)]
 pub struct JobOptions {
-    /// Rayon threads for this job; `None` uses the global pool.
+    /// Rayon threads for this job; `None` uses the default (RAYON_NUM_THREADS or every core).
     pub threads: Option<usize>,
     /// Minimum time between snapshots (DESIGN.md: at most ~10 per second); `None` sends only the
     /// final one (the CLI, which draws no splats).
     pub snapshot_interval: Option<Duration>,
     /// Run the worker and its rayon threads at a lower scheduling priority
-    /// (`train::priority`): the viewer's frames come first, training takes the rest.
+    /// (`train::priority`): the viewer's frames come first, the job takes the rest.
     pub low_priority: bool,
 }
 
@@ -105,39 +109,152 @@ impl Default for JobOptions {
     }
 }
 
-/// A running training job. Dropping the handle cancels the job and waits for the worker.
-pub struct TrainJob {
-    events: Receiver<JobEvent>,
+impl JobOptions {
+    /// What the CLI runs with: default threads, no intermediate snapshots.
+    pub fn headless(threads: Option<usize>) -> JobOptions {
+        JobOptions {
+            threads,
+            snapshot_interval: None,
+            low_priority: false,
+        }
+    }
+}
+
+/// What a job's work sees: the way to report and to hear pause and cancel. Not generic over the
+/// result, so one training loop serves every job that trains (train, refine, update).
+pub struct JobContext<'a> {
+    send: Box<dyn Fn(Update) -> bool + 'a>,
+    control: &'a Receiver<Control>,
+    snapshot_interval: Option<Duration>,
+    last_snapshot: Option<Instant>,
+    paused_since: Option<Instant>,
+    cancelled: bool,
+}
+
+/// The events a job's work sends (the final one is its return value).
+enum Update {
+    Progress(Progress),
+    Snapshot(Arc<Splats>),
+    Log(String),
+    NanRolledBack { step: u32, reason: String },
+}
+
+impl<R> From<Update> for JobEvent<R> {
+    fn from(update: Update) -> Self {
+        match update {
+            Update::Progress(p) => JobEvent::Progress(p),
+            Update::Snapshot(s) => JobEvent::Snapshot(s),
+            Update::Log(l) => JobEvent::Log(l),
+            Update::NanRolledBack { step, reason } => JobEvent::NanRolledBack { step, reason },
+        }
+    }
+}
+
+impl<'a> JobContext<'a> {
+    fn new<R: 'a>(
+        events: &'a Sender<JobEvent<R>>,
+        control: &'a Receiver<Control>,
+        options: &JobOptions,
+    ) -> JobContext<'a> {
+        JobContext {
+            send: Box::new(move |update| events.send(update.into()).is_ok()),
+            control,
+            snapshot_interval: options.snapshot_interval,
+            last_snapshot: None,
+            paused_since: None,
+            cancelled: false,
+        }
+    }
+
+    /// A log line for the user.
+    pub fn log(&self, line: impl Into<String>) {
+        (self.send)(Update::Log(line.into()));
+    }
+
+    /// Reports progress; false when nobody listens any more (the work should stop).
+    pub fn progress(&self, progress: Progress) -> bool {
+        (self.send)(Update::Progress(progress))
+    }
+
+    /// Reports a rolled-back training step.
+    pub fn rolled_back(&self, step: u32, reason: String) {
+        (self.send)(Update::NanRolledBack { step, reason });
+    }
+
+    /// Sends a snapshot made by `make` when the snapshot interval has passed (never in a job
+    /// without one).
+    pub fn snapshot_every(&mut self, make: impl FnOnce() -> Splats) {
+        if let Some(interval) = self.snapshot_interval
+            && self.last_snapshot.is_none_or(|t| t.elapsed() >= interval)
+        {
+            self.last_snapshot = Some(Instant::now());
+            (self.send)(Update::Snapshot(Arc::new(make())));
+        }
+    }
+
+    /// Sends a snapshot now (the final model).
+    pub fn snapshot(&self, splats: Arc<Splats>) {
+        (self.send)(Update::Snapshot(splats));
+    }
+
+    /// Applies pending control messages, blocking while paused. True once the job was cancelled
+    /// (or its client is gone while paused): the work should stop at the next safe point.
+    pub fn should_stop(&mut self) -> bool {
+        while !self.cancelled {
+            let message = if self.paused_since.is_some() {
+                match self.control.recv() {
+                    Ok(m) => m,
+                    // Client gone while paused: nobody can resume, so stop.
+                    Err(_) => Control::Cancel,
+                }
+            } else {
+                match self.control.try_recv() {
+                    Ok(m) => m,
+                    Err(TryRecvError::Empty) | Err(TryRecvError::Disconnected) => return false,
+                }
+            };
+            match message {
+                Control::Cancel => self.cancelled = true,
+                Control::Pause => {
+                    self.paused_since.get_or_insert_with(Instant::now);
+                }
+                Control::Resume => self.paused_since = None,
+            }
+        }
+        true
+    }
+}
+
+/// A running job. Dropping the handle cancels the job and waits for the worker.
+pub struct Job<R> {
+    events: Receiver<JobEvent<R>>,
     control: Sender<Control>,
     worker: Option<JoinHandle<()>>,
 }
 
-impl TrainJob {
-    /// Starts a job from what is already in memory.
-    pub fn spawn(setup: TrainSetup, options: JobOptions) -> TrainJob {
-        TrainJob::spawn_with(move |_log| Ok(setup), options)
-    }
-
-    /// Starts a job whose inputs are produced on the worker by `setup` (dataset loading,
-    /// initialisation); `setup` may send log lines through the given sender. An `Err` from it
-    /// ends the job with `Failed`.
-    pub fn spawn_with<F>(setup: F, options: JobOptions) -> TrainJob
+impl<R: Send + 'static> Job<R> {
+    /// Starts `work` on a worker thread named `damage-twin-<name>`, inside a rayon pool of its
+    /// own. Its `Ok` ends the job with `Finished`, its `Err` with `Failed`.
+    pub fn spawn<F>(name: &str, options: JobOptions, work: F) -> Job<R>
     where
-        F: FnOnce(&Sender<JobEvent>) -> Result<TrainSetup, String> + Send + 'static,
+        F: FnOnce(&mut JobContext) -> Result<R, JobError> + Send + 'static,
     {
         let (event_tx, events) = crossbeam_channel::unbounded();
         let (control, control_rx) = crossbeam_channel::unbounded();
         let worker = std::thread::Builder::new()
-            .name("damage-twin-train".into())
+            .name(format!("damage-twin-{name}"))
             .spawn(move || {
                 if options.low_priority {
                     priority::lower_current_thread_priority();
                 }
-                let body = || run_worker(setup, options, &event_tx, &control_rx);
+                let body = || {
+                    let mut context = JobContext::new(&event_tx, &control_rx, &options);
+                    work(&mut context)
+                };
                 // Always inside a pool of our own, even at the default size: started from this
-                // plain thread, every parallel loop of a step (~25) would hand its work to the
-                // global pool and sleep until it came back, two wake-ups per loop (3-7 % of
-                // user CPU per step at one thread on fox_bench_ds8, and 6x the system time).
+                // plain thread, every parallel loop of a training step (~25) would hand its work
+                // to the global pool and sleep until it came back, two wake-ups per loop (3-7 %
+                // of user CPU per step at one thread on fox_bench_ds8, and 6x the system time).
                 // A low-priority job's pool threads are lowered as they start.
                 let threads = options.threads.unwrap_or(0);
                 let mut pool = rayon::ThreadPoolBuilder::new().num_threads(threads);
@@ -146,7 +263,7 @@ impl TrainJob {
                 }
                 let result = match pool.build() {
                     Ok(pool) => pool.install(body),
-                    Err(e) => Err(format!("cannot start the training threads: {e}")),
+                    Err(e) => Err(JobError::Start(format!("the worker threads: {e}"))),
                 };
                 let last = match result {
                     Ok(outcome) => JobEvent::Finished(outcome),
@@ -155,30 +272,29 @@ impl TrainJob {
                 // The receiver may be gone (client dropped); nothing to report to then.
                 let _ = event_tx.send(last);
             });
-        let worker = match worker {
-            Ok(handle) => Some(handle),
+        match worker {
+            Ok(handle) => Job {
+                events,
+                control,
+                worker: Some(handle),
+            },
             Err(e) => {
                 // No thread: report the failure through the channel like any other.
                 let (tx, rx) = crossbeam_channel::unbounded();
-                let _ = tx.send(JobEvent::Failed(format!(
-                    "cannot start the training thread: {e}"
-                )));
-                return TrainJob {
+                let _ = tx.send(JobEvent::Failed(JobError::Start(format!(
+                    "the worker thread: {e}"
+                ))));
+                Job {
                     events: rx,
                     control,
                     worker: None,
-                };
+                }
             }
-        };
-        TrainJob {
-            events,
-            control,
-            worker,
         }
     }
 
     /// The event stream; ends after `Finished` or `Failed`.
-    pub fn events(&self) -> &Receiver<JobEvent> {
+    pub fn events(&self) -> &Receiver<JobEvent<R>> {
         &self.events
     }
 
@@ -199,26 +315,32 @@ impl TrainJob {
         self.worker.as_ref().is_none_or(|w| w.is_finished())
     }
 
-    /// Blocks until the job ends and returns its final event's payload, draining the rest.
-    pub fn wait(mut self) -> Result<TrainOutcome, String> {
-        let mut last = Err("the training job ended without a result".to_string());
+    /// Blocks until the job ends and returns its result, draining the other events.
+    pub fn wait(self) -> Result<R, JobError> {
+        self.wait_with(|_| {})
+    }
+
+    /// Blocks until the job ends, handing every event but the last to `on_event` (a progress
+    /// bar, a log), and returns the result.
+    pub fn wait_with(mut self, mut on_event: impl FnMut(JobEvent<R>)) -> Result<R, JobError> {
+        let mut last = Err(JobError::NoResult);
         for event in self.events.iter() {
             match event {
                 JobEvent::Finished(outcome) => last = Ok(outcome),
                 JobEvent::Failed(e) => last = Err(e),
-                _ => {}
+                other => on_event(other),
             }
         }
         if let Some(worker) = self.worker.take()
             && worker.join().is_err()
         {
-            return Err("the training thread panicked".into());
+            return Err(JobError::NoResult);
         }
         last
     }
 }
 
-impl Drop for TrainJob {
+impl<R> Drop for Job<R> {
     fn drop(&mut self) {
         if let Some(worker) = self.worker.take() {
             let _ = self.control.send(Control::Cancel);
@@ -227,124 +349,60 @@ impl Drop for TrainJob {
     }
 }
 
-/// Applies pending control messages; blocks while paused. Returns true when cancelled.
-fn handle_control(control: &Receiver<Control>, paused_since: &mut Option<Instant>) -> bool {
-    loop {
-        let message = if paused_since.is_some() {
-            match control.recv() {
-                Ok(m) => m,
-                // Client gone while paused: nobody can resume, so stop.
-                Err(_) => return true,
-            }
-        } else {
-            match control.try_recv() {
-                Ok(m) => m,
-                Err(TryRecvError::Empty) | Err(TryRecvError::Disconnected) => return false,
-            }
-        };
-        match message {
-            Control::Cancel => return true,
-            Control::Pause => {
-                if paused_since.is_none() {
-                    *paused_since = Some(Instant::now());
-                }
-            }
-            Control::Resume => {
-                *paused_since = None;
-            }
-        }
-    }
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-fn run_worker<F>(
-    setup: F,
-    options: JobOptions,
-    events: &Sender<JobEvent>,
-    control: &Receiver<Control>,
-) -> Result<TrainOutcome, String>
-where
-    F: FnOnce(&Sender<JobEvent>) -> Result<TrainSetup, String>,
-{
-    let TrainSetup {
-        spec,
-        splats,
-        views,
-        heldout,
-    } = setup(events)?;
-    let eval_every = spec.eval_every;
-    let mut trainer = Trainer::new(spec, splats, views).map_err(|e| e.to_string())?;
-    let total = trainer.total_steps();
-    let _ = events.send(JobEvent::Log(format!(
-        "training {} Gaussians on {} views for {total} steps",
-        trainer.splats().len(),
-        trainer.view_count()
-    )));
-
-    let mut paused_since = None;
-    let mut train_time = Duration::ZERO;
-    let mut last_snapshot: Option<Instant> = None;
-    let mut cancelled = false;
-    let mut rolled_back = 0;
-    while !trainer.is_done() {
-        if handle_control(control, &mut paused_since) {
-            cancelled = true;
-            break;
-        }
-        let started = Instant::now();
-        let report = trainer.step();
-        if let Some(reason) = report.rolled_back {
-            rolled_back += 1;
-            let _ = events.send(JobEvent::NanRolledBack {
-                step: report.step,
-                reason,
-            });
-        }
-        let step = trainer.steps_done();
-        let psnr =
-            if !heldout.is_empty() && eval_every > 0 && step % eval_every == 0 && step < total {
-                Some(trainer.evaluate(&heldout).psnr)
-            } else {
-                None
-            };
-        train_time += started.elapsed();
-        let per_step = train_time.as_secs_f64() / step.max(1) as f64;
-        let progress = Progress {
-            step,
-            total,
-            loss: report.loss,
-            psnr,
-            gaussians: trainer.splats().len(),
-            elapsed: train_time,
-            eta: Duration::from_secs_f64(per_step * (total - step.min(total)) as f64),
-        };
-        if events.send(JobEvent::Progress(progress)).is_err() {
-            // Nobody listens any more: stop working for nobody.
-            cancelled = true;
-            break;
-        }
-        if let Some(interval) = options.snapshot_interval
-            && last_snapshot.is_none_or(|t| t.elapsed() >= interval)
-        {
-            last_snapshot = Some(Instant::now());
-            let _ = events.send(JobEvent::Snapshot(Arc::new(trainer.splats().clone())));
-        }
+    #[test]
+    fn a_job_reports_its_logs_then_its_result() {
+        let job = Job::spawn("test", JobOptions::headless(Some(1)), |ctx| {
+            ctx.log("working");
+            Ok(41 + 1)
+        });
+        let mut logs = Vec::new();
+        let result = job.wait_with(|event| {
+            if let JobEvent::Log(line) = event {
+                logs.push(line);
+            }
+        });
+        assert_eq!(result.unwrap(), 42);
+        assert_eq!(logs, vec!["working".to_string()]);
     }
 
-    let started = Instant::now();
-    let final_scores = (!heldout.is_empty()).then(|| trainer.evaluate(&heldout));
-    train_time += started.elapsed();
-    let steps = trainer.steps_done();
-    let timings = trainer.timings().clone();
-    let splats = Arc::new(trainer.into_splats());
-    let _ = events.send(JobEvent::Snapshot(splats.clone()));
-    Ok(TrainOutcome {
-        splats,
-        steps,
-        total,
-        cancelled,
-        seconds: train_time.as_secs_f64(),
-        heldout: final_scores,
-        rolled_back,
-        timings,
-    })
+    #[test]
+    fn a_failing_job_ends_with_its_typed_error() {
+        let job: Job<()> = Job::spawn("test", JobOptions::headless(Some(1)), |_| {
+            Err(JobError::Invalid("nothing to do".into()))
+        });
+        assert!(matches!(job.wait(), Err(JobError::Invalid(m)) if m == "nothing to do"));
+    }
+
+    #[test]
+    fn cancel_reaches_the_work_while_paused() {
+        let (started_tx, started) = crossbeam_channel::bounded(1);
+        let job = Job::spawn("test", JobOptions::headless(Some(1)), move |ctx| {
+            let _ = started_tx.send(());
+            let mut checks = 0u64;
+            while !ctx.should_stop() {
+                checks += 1;
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            Ok(checks)
+        });
+        started.recv().unwrap();
+        job.pause();
+        job.cancel();
+        assert!(
+            job.wait().is_ok(),
+            "a cancelled job still returns what it did"
+        );
+    }
+
+    #[test]
+    fn a_panicking_job_reports_no_result() {
+        let job: Job<()> = Job::spawn("test", JobOptions::headless(Some(1)), |_| {
+            panic!("deliberate test panic")
+        });
+        assert!(matches!(job.wait(), Err(JobError::NoResult)));
+    }
 }

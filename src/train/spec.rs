@@ -5,7 +5,7 @@
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use crate::scene::{Camera, ImageScale, Mask, RgbImage};
+use crate::scene::{Camera, Mask, RgbImage};
 use crate::train::adam::{GroupFlags, LearningRates, ParamGroup};
 use crate::train::densify::DensifyConfig;
 
@@ -160,13 +160,12 @@ impl Default for Targets {
     }
 }
 
-/// One training run's settings.
+/// One training run's settings. Resolution is not one of them: it is a property of the views
+/// given to the trainer (`TrainView`), loaded at whatever scale their caller chose.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TrainSpec {
     /// Indices into the training views given to the trainer; `None` means all of them.
     pub views: Option<Vec<usize>>,
-    /// Resolution the views are loaded at (used by whoever loads them: CLI, job, app).
-    pub scale: ImageScale,
     pub iterations: u32,
     /// Per Gaussian of the initial model: which ones may change (the rest are frozen but still
     /// rendered). `None`: every Gaussian not marked frozen in `SplatMeta`. Gaussians created by
@@ -191,7 +190,6 @@ impl TrainSpec {
     pub fn reconstruction(iterations: u32) -> TrainSpec {
         TrainSpec {
             views: None,
-            scale: ImageScale::Factor(1),
             iterations,
             trainable: None,
             groups: ParamGroups::ALL,

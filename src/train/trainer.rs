@@ -8,8 +8,10 @@ use std::time::Instant;
 use glam::Vec3;
 use serde::Serialize;
 
-use crate::raster::{Rasterizer, RenderOutput, RenderSettings, SplatGrads};
-use crate::splats::Splats;
+use crate::raster::{
+    PixelGrads, RasterBackend, Rasterizer, RenderOutput, RenderSettings, SplatGrads,
+};
+use crate::splats::{MAX_LABEL_CHANNELS, Splats};
 use crate::train::adam::{Adam, GroupFlags, LearningRates, ParamGrads};
 use crate::train::densify::{Densifier, camera_extent};
 use crate::train::evaluate::{EvalScores, evaluate_with};
@@ -21,9 +23,6 @@ use crate::train::spec::{TrainSpec, TrainView};
 /// Steps between rollback checkpoints (also taken after every density change). A rollback loses
 /// at most this many steps; a copy every 100 steps costs well under 1 % of training time.
 const CHECKPOINT_EVERY: u32 = 100;
-
-/// Label channels the loss is evaluated for without a per-step allocation (3 damage classes).
-const MAX_LABEL_CHANNELS: usize = 8;
 
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
@@ -119,7 +118,8 @@ pub struct Trainer {
     views: Vec<TrainView>,
     /// Loss region per view as weights (0/1), converted once.
     regions: Vec<Option<Vec<f32>>>,
-    rasterizer: Rasterizer,
+    /// The renderer (the CPU rasterizer unless `with_backend` chose another).
+    rasterizer: Box<dyn RasterBackend>,
     out: RenderOutput,
     grads: SplatGrads,
     adam: Adam,
@@ -145,11 +145,22 @@ pub struct Trainer {
 }
 
 impl Trainer {
-    /// Prepares a run: selects the spec's views, applies the trainable mask, sizes every buffer.
+    /// Prepares a run on the CPU rasterizer: selects the spec's views, applies the trainable
+    /// mask, sizes every buffer.
     pub fn new(
+        spec: TrainSpec,
+        splats: Splats,
+        views: Vec<TrainView>,
+    ) -> Result<Trainer, TrainError> {
+        Trainer::with_backend(spec, splats, views, Box::new(Rasterizer::new()))
+    }
+
+    /// `new` on another renderer (a GPU backend).
+    pub fn with_backend(
         spec: TrainSpec,
         mut splats: Splats,
         views: Vec<TrainView>,
+        backend: Box<dyn RasterBackend>,
     ) -> Result<Trainer, TrainError> {
         splats.check_lengths().map_err(TrainError::Splats)?;
         if let Some(what) = first_non_finite_param(&splats) {
@@ -229,7 +240,7 @@ impl Trainer {
         let rng = fastrand::Rng::with_seed(spec.seed);
         Ok(Trainer {
             regions,
-            rasterizer: Rasterizer::new(),
+            rasterizer: backend,
             out: RenderOutput::default(),
             grads,
             adam,
@@ -349,7 +360,7 @@ impl Trainer {
         self.rasterizer
             .forward(&self.splats, &view.camera, &settings, &mut self.out);
         self.timings.forward += t.elapsed().as_secs_f64();
-        let parts = *self.rasterizer.timings();
+        let parts = self.rasterizer.timings();
         self.timings.project += parts.project.as_secs_f64();
         self.timings.sort += parts.sort.as_secs_f64();
         self.timings.rasterize += parts.raster_forward.as_secs_f64();
@@ -408,17 +419,21 @@ impl Trainer {
 
         // Backward.
         let t = Instant::now();
+        let v_out = PixelGrads {
+            color: &self.v_color,
+            alpha: None,
+            depth: None,
+            labels: labels_on.then_some(self.v_labels.as_slice()),
+        };
         self.rasterizer.backward(
             &self.splats,
             &view.camera,
             &settings,
-            &self.v_color,
-            None,
-            labels_on.then_some(self.v_labels.as_slice()),
+            &v_out,
             &mut self.grads,
         );
         self.timings.backward += t.elapsed().as_secs_f64();
-        let parts = *self.rasterizer.timings();
+        let parts = self.rasterizer.timings();
         self.timings.rasterize_backward += parts.raster_backward.as_secs_f64();
         self.timings.project_backward += parts.project_backward.as_secs_f64();
 
@@ -451,10 +466,7 @@ impl Trainer {
         let mut changed = false;
         if let Some(densifier) = &mut self.densifier {
             if step < densifier.config.stop {
-                densifier.accumulate(
-                    &self.grads.v_means2d_norm,
-                    &self.rasterizer.projected().radii,
-                );
+                densifier.accumulate(&self.grads.v_means2d_norm, self.rasterizer.radii());
             }
             let report = densifier.after_step(step, &mut self.splats, &mut self.adam, self.extent);
             changed = report.densified || report.opacity_reset;
@@ -521,7 +533,7 @@ impl Trainer {
     pub fn evaluate(&mut self, views: &[TrainView]) -> EvalScores {
         let settings = RenderSettings::new(self.spec.background, self.active_sh_degree());
         evaluate_with(
-            &mut self.rasterizer,
+            self.rasterizer.as_mut(),
             &mut self.out,
             &self.splats,
             views,

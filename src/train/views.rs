@@ -44,17 +44,13 @@ pub fn split_views(
         Holdout::Named(names) => {
             let mut flags = vec![false; n];
             for name in names {
-                let index = dataset
-                    .views
-                    .iter()
-                    .position(|v| &v.name == name || v.name.ends_with(&format!("/{name}")))
-                    .ok_or_else(|| {
-                        format!(
-                            "no view named {name:?} in {} (views are named like {:?})",
-                            dataset.root.display(),
-                            dataset.views.first().map(|v| v.name.as_str()).unwrap_or("")
-                        )
-                    })?;
+                let index = dataset.view_index(name).ok_or_else(|| {
+                    format!(
+                        "no view named {name:?} in {} (views are named like {})",
+                        dataset.root.display(),
+                        dataset.example_view_names()
+                    )
+                })?;
                 flags[index] = true;
             }
             flags

@@ -11,8 +11,8 @@ use super::header::RowReader;
 use crate::scene::DamageClass;
 use crate::scene::SceneError;
 use crate::scene::atomic::write_atomic;
-use crate::splats::Splats;
 use crate::splats::model::sh_coeffs_for_degree;
+use crate::splats::{MAX_LABEL_CHANNELS, Splats};
 
 /// Largest id stored exactly in the `double id` property (2^53).
 const MAX_EXACT_ID: u64 = 1 << 53;
@@ -153,6 +153,15 @@ pub fn read_splats(path: &Path) -> Result<Splats, SceneError> {
     let mut label_props = Vec::new();
     while let Some(i) = vertex.find(&label_property(label_props.len())) {
         label_props.push(i);
+        if label_props.len() > MAX_LABEL_CHANNELS {
+            return Err(SceneError::unsupported(
+                path,
+                format!(
+                    "more than {MAX_LABEL_CHANNELS} label_* properties: damage-twin supports at \
+                     most {MAX_LABEL_CHANNELS} damage label channels"
+                ),
+            ));
+        }
     }
     let survey = vertex.find("survey");
     let id = vertex.find("id");

@@ -1,12 +1,13 @@
 //! Training curves as files (plotters): loss, held-out PSNR and Gaussian count against wall time,
-//! as PNG and SVG, from the same `History` the live charts draw. Presentation only.
+//! as PNG and SVG, from the same `History` the viewer's live charts draw. Presentation only.
 
 use std::path::Path;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::app::history::History;
+use crate::report::ChartError;
+use crate::train::history::History;
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
@@ -112,18 +113,18 @@ where
 pub fn write_training_charts(
     dir: &Path,
     history: &History,
-) -> anyhow::Result<Vec<std::path::PathBuf>> {
+) -> Result<Vec<std::path::PathBuf>, ChartError> {
     let png = dir.join("training.png");
     let svg = dir.join("training.svg");
     draw(
         BitMapBackend::new(&png, (900, 900)).into_drawing_area(),
         history,
     )
-    .map_err(|e| anyhow::anyhow!("drawing {}: {e}", png.display()))?;
+    .map_err(|e| ChartError::new(&png, e))?;
     draw(
         SVGBackend::new(&svg, (900, 900)).into_drawing_area(),
         history,
     )
-    .map_err(|e| anyhow::anyhow!("drawing {}: {e}", svg.display()))?;
+    .map_err(|e| ChartError::new(&svg, e))?;
     Ok(vec![png, svg])
 }

@@ -1,8 +1,10 @@
-//! Training history for the live charts and the statistics panel: loss, PSNR and Gaussian count
-//! against wall time, bounded in memory by thinning old samples. Data only; the charts panel and
-//! the headless demo's plotters chart both read it.
+//! Training history for the live charts, the statistics panel and the exported charts: loss,
+//! PSNR and Gaussian count against wall time, bounded in memory by thinning old samples. Data
+//! only; it is filled from job progress here, in one place, for the viewer and the CLI alike.
 
 use serde::Serialize;
+
+use crate::train::job::Progress;
 
 /// One progress report of a training run.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -55,6 +57,33 @@ impl History {
 
     pub fn push_eval(&mut self, eval: EvalSample) {
         self.evals.push(eval);
+    }
+
+    /// Records one progress report seen at `wall_s` (seconds since the run started): a sample,
+    /// and a held-out evaluation when the step had one.
+    pub fn record_progress(&mut self, progress: &Progress, wall_s: f64) {
+        self.push(Sample {
+            wall_s,
+            step: progress.step,
+            loss: f64::from(progress.loss),
+            psnr: f64::NAN,
+            gaussians: progress.gaussians,
+        });
+        if let Some(psnr) = progress.psnr {
+            self.push_eval(EvalSample {
+                wall_s,
+                step: progress.step,
+                psnr,
+            });
+        }
+    }
+
+    /// Records the finished model's held-out PSNR at the last recorded step.
+    pub fn record_final(&mut self, heldout_psnr: Option<f64>, wall_s: f64) {
+        if let (Some(psnr), Some(last)) = (heldout_psnr, self.samples.last()) {
+            let step = last.step;
+            self.push_eval(EvalSample { wall_s, step, psnr });
+        }
     }
 
     pub fn last(&self) -> Option<&Sample> {

@@ -1,13 +1,42 @@
-//! Display of the damage layer (issue 7): class colours over the photo-real render. Per pixel on
-//! a CPU render (`composite`), or per Gaussian before the GPU upload (`display_splats`: blending
-//! is linear in colour, so tinting each Gaussian by its label probability matches tinting the
-//! blended label channels). Display only: no evaluation, no thresholds.
+//! Display of the damage layer: class colours over the photo-real render. Per pixel on a CPU
+//! render (`composite`), or per Gaussian before rendering or GPU upload (`display_splats`:
+//! blending is linear in colour, so tinting each Gaussian by its label probability matches
+//! tinting the blended label channels). Display only: no evaluation, no thresholds.
 
 use std::borrow::Cow;
 
-use crate::app::settings::DamageLayer;
+use serde::{Deserialize, Serialize};
+
+use crate::scene::DamageClass;
 use crate::splats::Splats;
 use crate::splats::model::{SH_C0, sigmoid};
+
+/// How the damage layer is drawn (the viewer's settings, `render --damage-layer`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct DamageLayer {
+    pub enabled: bool,
+    /// Opacity of the class colours over the photo-real render.
+    pub opacity: f32,
+    /// Show only damage (no photo-real colour).
+    pub damage_only: bool,
+    /// Per class, in `DamageClass::ALL` order: shown or not.
+    pub visible: [bool; 3],
+    /// Per class colour (sRGB), in `DamageClass::ALL` order.
+    pub colours: [[u8; 3]; 3],
+}
+
+impl Default for DamageLayer {
+    fn default() -> Self {
+        DamageLayer {
+            enabled: true,
+            opacity: 0.7,
+            damage_only: false,
+            visible: [true; 3],
+            colours: DamageClass::ALL.map(|c| c.default_colour()),
+        }
+    }
+}
 
 /// sRGB byte to linear-ish [0, 1] (renders are stored as [0, 1] colour, no gamma change).
 fn unit(c: u8) -> f32 {

@@ -1,0 +1,178 @@
+//! What several subcommands share: how a run reads its dataset (scale, SH degree, held-out rule,
+//! background, threads), the value parsers, and drawing a job's progress on the terminal.
+
+use std::path::Path;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use glam::Vec3;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use damage_twin::damage::Palette;
+use damage_twin::scene::open::OpenOptions;
+use damage_twin::scene::{Dataset, ImageScale};
+use damage_twin::train::job::{Job, JobEvent, Progress};
+use damage_twin::train::views::Holdout;
+
+/// How a run reads its dataset and starts: shared by `train` and `bench`, so the two time the
+/// same run.
+#[derive(clap::Args, Debug)]
+pub struct RunArgs {
+    /// Image scale: 1, 2, 4, 8, 0.25 or w<width>.
+    #[arg(long, default_value = "1", value_parser = parse_scale)]
+    pub scale: ImageScale,
+    #[arg(long, default_value_t = 3)]
+    pub sh_degree: u32,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[command(flatten)]
+    pub holdout: HoldoutArgs,
+    /// Background: white, black or r,g,b in [0, 1].
+    #[arg(long, default_value = "black", value_parser = parse_background)]
+    pub background: Vec3,
+    /// Training threads (default: all cores, or RAYON_NUM_THREADS).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Random initial points when the dataset has none (NeRF-synthetic, instant-ngp).
+    #[arg(long, default_value_t = 100_000)]
+    pub init_points: usize,
+}
+
+/// Which views are held out: the rule `train`, `bench`, `eval` and `study` share.
+#[derive(clap::Args, Debug)]
+pub struct HoldoutArgs {
+    /// Hold out every n-th view (when the dataset has no test split).
+    #[arg(long, default_value_t = 8)]
+    pub test_every: usize,
+    /// Hold out exactly these views (comma-separated names, e.g. 0049).
+    #[arg(long, value_delimiter = ',')]
+    pub test_views: Vec<String>,
+}
+
+impl HoldoutArgs {
+    pub fn holdout(&self) -> Holdout {
+        if self.test_views.is_empty() {
+            Holdout::Auto {
+                every: self.test_every,
+            }
+        } else {
+            Holdout::Named(self.test_views.clone())
+        }
+    }
+}
+
+/// The palette with the user's `--colour class=r,g,b` overrides.
+pub fn palette(overrides: &[String]) -> anyhow::Result<Palette> {
+    let mut palette = Palette::default();
+    for text in overrides {
+        palette.set_from_text(text).map_err(anyhow::Error::msg)?;
+    }
+    Ok(palette)
+}
+
+pub fn parse_scale(text: &str) -> Result<ImageScale, String> {
+    ImageScale::parse(text)
+        .ok_or_else(|| format!("bad scale {text:?}: use 1, 2, 4, 8, 0.5, 0.25, 0.125 or w<width>"))
+}
+
+pub fn parse_background(text: &str) -> Result<Vec3, String> {
+    match text {
+        "white" => return Ok(Vec3::ONE),
+        "black" => return Ok(Vec3::ZERO),
+        _ => {}
+    }
+    let parts: Vec<f32> = text
+        .split(',')
+        .map(|p| p.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("bad background {text:?}: use white, black or r,g,b"))?;
+    match parts[..] {
+        [r, g, b] if [r, g, b].iter().all(|v| (0.0..=1.0).contains(v)) => Ok(Vec3::new(r, g, b)),
+        _ => Err(format!(
+            "bad background {text:?}: use white, black or r,g,b in [0, 1]"
+        )),
+    }
+}
+
+/// Opens a dataset with its images composited on `background`; prints its warnings.
+pub fn open_dataset(path: &Path, background: Vec3) -> anyhow::Result<Dataset> {
+    let options = OpenOptions {
+        background: background.to_array(),
+    };
+    let dataset = Dataset::open(path, &options)
+        .with_context(|| format!("opening dataset {}", path.display()))?;
+    if dataset.views.is_empty() {
+        bail!("{} has no usable views", path.display());
+    }
+    for warning in &dataset.warnings {
+        eprintln!("warning: {warning}");
+    }
+    Ok(dataset)
+}
+
+/// Reads a model PLY.
+pub fn read_model(path: &Path) -> anyhow::Result<damage_twin::splats::Splats> {
+    damage_twin::scene::ply::read_splats(path)
+        .with_context(|| format!("reading model {}", path.display()))
+}
+
+/// A line above a progress bar, or on stderr when the bar is hidden (stderr is not a terminal,
+/// or `--quiet`: indicatif's `println` then prints nothing).
+pub fn print_line(bar: &ProgressBar, line: String) {
+    if bar.is_hidden() {
+        eprintln!("{line}");
+    } else {
+        bar.println(line);
+    }
+}
+
+/// Runs a job to its end on the terminal: a progress bar (hidden with `quiet`), log lines and
+/// rolled-back steps above it, and every progress report handed to `on_progress` too (curves).
+pub fn drive<R: Send + 'static>(
+    job: Job<R>,
+    what: &str,
+    quiet: bool,
+    mut on_progress: impl FnMut(&Progress),
+) -> anyhow::Result<R> {
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(0)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{msg:>10} {bar:30} {pos}/{len} ETA {eta} | {prefix}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.enable_steady_tick(Duration::from_millis(250));
+    let mut last_psnr: Option<f64> = None;
+    let result = job.wait_with(|event| match event {
+        JobEvent::Progress(p) => {
+            on_progress(&p);
+            if p.psnr.is_some() {
+                last_psnr = p.psnr;
+            }
+            bar.set_message(p.phase);
+            bar.set_length(u64::from(p.total));
+            bar.set_position(u64::from(p.step));
+            let loss = if p.loss.is_finite() {
+                format!("loss {:.4} | ", p.loss)
+            } else {
+                String::new()
+            };
+            bar.set_prefix(format!(
+                "{loss}held-out PSNR {} | {} Gaussians",
+                last_psnr
+                    .map(|v| format!("{v:.2} dB"))
+                    .unwrap_or_else(|| "-".into()),
+                p.gaussians
+            ));
+        }
+        JobEvent::Log(line) => print_line(&bar, line),
+        JobEvent::NanRolledBack { step, reason } => {
+            print_line(&bar, format!("step {step}: rolled back ({reason})"))
+        }
+        JobEvent::Snapshot(_) | JobEvent::Finished(_) | JobEvent::Failed(_) => {}
+    });
+    bar.finish_and_clear();
+    result.with_context(|| format!("{what} failed"))
+}

@@ -1,0 +1,77 @@
+//! The seam between the trainer and a renderer: forward a model from a camera, then the exact
+//! backward of that frame. The CPU `Rasterizer` is the reference implementation; a GPU backend
+//! implements the same trait, so the trainer's schedule, losses, densification and job are the
+//! same whichever renders.
+
+use super::{PixelGrads, Rasterizer, RenderOutput, RenderSettings, SplatGrads, StageTimings};
+use crate::scene::Camera;
+use crate::splats::Splats;
+
+/// A differentiable renderer the trainer can drive.
+pub trait RasterBackend: Send {
+    /// A short name for logs and benchmarks (`"cpu"`, `"gpu"`).
+    fn name(&self) -> &'static str;
+
+    /// Renders `splats` from `camera` into `out` (resized as needed) and keeps what the
+    /// backward needs.
+    fn forward(
+        &mut self,
+        splats: &Splats,
+        camera: &Camera,
+        settings: &RenderSettings,
+        out: &mut RenderOutput,
+    );
+
+    /// The backward of the last forward (same splats, camera and settings): every gradient in
+    /// `grads` is overwritten, `grads.visible` and `grads.v_means2d_norm` included.
+    fn backward(
+        &mut self,
+        splats: &Splats,
+        camera: &Camera,
+        settings: &RenderSettings,
+        v_out: &PixelGrads,
+        grads: &mut SplatGrads,
+    );
+
+    /// Per Gaussian, the screen radius of the last forward (0: culled); density control
+    /// reads it.
+    fn radii(&self) -> &[u32];
+
+    /// Wall time per stage of the last forward and backward.
+    fn timings(&self) -> StageTimings;
+}
+
+impl RasterBackend for Rasterizer {
+    fn name(&self) -> &'static str {
+        "cpu"
+    }
+
+    fn forward(
+        &mut self,
+        splats: &Splats,
+        camera: &Camera,
+        settings: &RenderSettings,
+        out: &mut RenderOutput,
+    ) {
+        Rasterizer::forward(self, splats, camera, settings, out);
+    }
+
+    fn backward(
+        &mut self,
+        splats: &Splats,
+        camera: &Camera,
+        settings: &RenderSettings,
+        v_out: &PixelGrads,
+        grads: &mut SplatGrads,
+    ) {
+        self.backward_pixels(splats, camera, settings, v_out, grads);
+    }
+
+    fn radii(&self) -> &[u32] {
+        &self.projected().radii
+    }
+
+    fn timings(&self) -> StageTimings {
+        *Rasterizer::timings(self)
+    }
+}

@@ -1,0 +1,9 @@
+//! The survey timeline: the twin project (a folder with `twin.ron`) and its surveys in date
+//! order, each with its dataset, its model (the twin as of that survey) and its metrics. Later
+//! surveys are placed in the twin's frame, compared with it and used to update it; an earlier
+//! survey's model is never overwritten. Uses `scene` for the file format, `train`/`damage` for
+//! the work; must not contain UI.
+
+pub mod twin;
+
+pub use twin::{TimelineError, Twin};

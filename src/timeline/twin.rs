@@ -1,0 +1,448 @@
+//! `Twin`: an opened twin project folder. Opens and saves `twin.ron` (atomically, through
+//! `scene::project`), adds surveys with dataset paths stored relative to the folder, and writes
+//! each survey's model and metrics under `surveys/<name>/`. The app and the CLI both go through
+//! here; neither writes project files itself.
+
+use std::path::{Component, Path, PathBuf};
+
+use serde::Serialize;
+
+use crate::scene::atomic::write_atomic;
+use crate::scene::project::{PROJECT_FILE, Project, Survey, SurveyError};
+use crate::scene::{SceneError, ply};
+use crate::splats::Splats;
+
+/// File names inside a survey's folder.
+pub const MODEL_FILE: &str = "model.ply";
+pub const METRICS_FILE: &str = "metrics.json";
+
+#[derive(Debug, thiserror::Error)]
+pub enum TimelineError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error("{}: {source}", file.display())]
+    Survey {
+        file: PathBuf,
+        #[source]
+        source: SurveyError,
+    },
+    #[error("{}: no survey named `{name}` (surveys: {known})", file.display())]
+    NoSurvey {
+        file: PathBuf,
+        name: String,
+        known: String,
+    },
+    #[error("{}: the project has no survey yet", file.display())]
+    Empty { file: PathBuf },
+    #[error("{}: a twin project already exists there", file.display())]
+    Exists { file: PathBuf },
+    #[error("{}: {message}", path.display())]
+    Io { path: PathBuf, message: String },
+}
+
+/// A twin project opened from (or created in) a folder.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Twin {
+    dir: PathBuf,
+    pub project: Project,
+}
+
+impl Twin {
+    /// A new, empty project in `dir` (created when missing); refuses a folder that already holds
+    /// a project. Nothing is written until `save`.
+    pub fn create(dir: &Path) -> Result<Twin, TimelineError> {
+        let file = dir.join(PROJECT_FILE);
+        if file.exists() {
+            return Err(TimelineError::Exists { file });
+        }
+        std::fs::create_dir_all(dir).map_err(|e| io_error(dir, e))?;
+        Ok(Twin {
+            dir: dir.to_path_buf(),
+            project: Project::new(),
+        })
+    }
+
+    /// Opens a project: its folder or its `twin.ron`.
+    pub fn open(path: &Path) -> Result<Twin, TimelineError> {
+        let (dir, file) = if path.is_dir() {
+            (path.to_path_buf(), path.join(PROJECT_FILE))
+        } else {
+            let dir = match path.parent() {
+                Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+                _ => PathBuf::from("."),
+            };
+            (dir, path.to_path_buf())
+        };
+        let project = Project::load(&file)?;
+        Ok(Twin { dir, project })
+    }
+
+    /// Opens the project in `dir`, or starts a new one there when it holds none.
+    pub fn open_or_create(dir: &Path) -> Result<Twin, TimelineError> {
+        if dir.join(PROJECT_FILE).is_file() {
+            Twin::open(dir)
+        } else {
+            Twin::create(dir)
+        }
+    }
+
+    /// The project folder.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The project file, `<dir>/twin.ron`.
+    pub fn file(&self) -> PathBuf {
+        self.dir.join(PROJECT_FILE)
+    }
+
+    /// Writes `twin.ron` atomically.
+    pub fn save(&self) -> Result<(), TimelineError> {
+        Ok(self.project.save(&self.file())?)
+    }
+
+    /// A path from the project made usable: relative paths join the project folder.
+    pub fn resolve(&self, path: &Path) -> PathBuf {
+        if path.is_absolute() {
+            path.to_path_buf()
+        } else {
+            self.dir.join(path)
+        }
+    }
+
+    /// How `path` is stored in `twin.ron`: relative to the project folder when both are on the
+    /// same root, so the folder can move with its datasets; absolute otherwise.
+    pub fn relative(&self, path: &Path) -> PathBuf {
+        let (Ok(target), Ok(base)) = (absolute(path), absolute(&self.dir)) else {
+            return path.to_path_buf();
+        };
+        relative_path(&target, &base).unwrap_or(target)
+    }
+
+    /// Appends a survey of `dataset` (not older than the latest survey; name unique).
+    pub fn add_survey(
+        &mut self,
+        name: &str,
+        date: &str,
+        dataset: &Path,
+    ) -> Result<usize, TimelineError> {
+        let survey = Survey {
+            name: name.to_string(),
+            date: date.to_string(),
+            dataset: self.relative(dataset),
+            model: None,
+            metrics: None,
+        };
+        self.project
+            .add_survey(survey)
+            .map_err(|source| TimelineError::Survey {
+                file: self.file(),
+                source,
+            })
+    }
+
+    /// Index of the survey named `name`.
+    pub fn survey_index(&self, name: &str) -> Result<usize, TimelineError> {
+        self.project
+            .surveys
+            .iter()
+            .position(|s| s.name == name)
+            .ok_or_else(|| TimelineError::NoSurvey {
+                file: self.file(),
+                name: name.to_string(),
+                known: self
+                    .project
+                    .surveys
+                    .iter()
+                    .map(|s| s.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            })
+    }
+
+    pub fn survey(&self, name: &str) -> Result<&Survey, TimelineError> {
+        Ok(&self.project.surveys[self.survey_index(name)?])
+    }
+
+    /// The latest survey (the one the twin shows by default).
+    pub fn latest(&self) -> Result<&Survey, TimelineError> {
+        self.project
+            .surveys
+            .last()
+            .ok_or_else(|| TimelineError::Empty { file: self.file() })
+    }
+
+    /// The survey whose dataset is `dataset` (compared as resolved, absolute paths).
+    pub fn survey_of_dataset(&self, dataset: &Path) -> Option<&Survey> {
+        let wanted = absolute(dataset).ok()?;
+        self.project.surveys.iter().find(|s| {
+            !s.dataset.as_os_str().is_empty()
+                && absolute(&self.resolve(&s.dataset)).ok().as_ref() == Some(&wanted)
+        })
+    }
+
+    /// The folder of a survey's outputs, `<dir>/surveys/<name>/`.
+    pub fn survey_dir(&self, name: &str) -> PathBuf {
+        self.dir.join("surveys").join(name)
+    }
+
+    /// A survey's dataset folder, resolved.
+    pub fn dataset_path(&self, name: &str) -> Result<PathBuf, TimelineError> {
+        Ok(self.resolve(&self.survey(name)?.dataset))
+    }
+
+    /// A survey's model file, resolved (None before one was saved).
+    pub fn model_path(&self, name: &str) -> Result<Option<PathBuf>, TimelineError> {
+        Ok(self.survey(name)?.model.as_ref().map(|m| self.resolve(m)))
+    }
+
+    /// Reads a survey's model.
+    pub fn load_model(&self, name: &str) -> Result<Option<Splats>, TimelineError> {
+        match self.model_path(name)? {
+            Some(path) => Ok(Some(ply::read_splats(&path)?)),
+            None => Ok(None),
+        }
+    }
+
+    /// Writes `splats` as survey `name`'s model (`surveys/<name>/model.ply`, atomically) and
+    /// records it in the project (saved by the next `save`). Only that survey's file is written:
+    /// every other survey's model stays as it is.
+    pub fn save_model(&mut self, name: &str, splats: &Splats) -> Result<PathBuf, TimelineError> {
+        let index = self.survey_index(name)?;
+        let folder = self.survey_dir(name);
+        std::fs::create_dir_all(&folder).map_err(|e| io_error(&folder, e))?;
+        let path = folder.join(MODEL_FILE);
+        ply::write_splats(&path, splats)?;
+        self.project.surveys[index].model = Some(self.relative(&path));
+        Ok(path)
+    }
+
+    /// Writes survey `name`'s metrics as pretty JSON (`surveys/<name>/metrics.json`, atomically)
+    /// and records the file in the project.
+    pub fn save_metrics(
+        &mut self,
+        name: &str,
+        metrics: &impl Serialize,
+    ) -> Result<PathBuf, TimelineError> {
+        let index = self.survey_index(name)?;
+        let folder = self.survey_dir(name);
+        std::fs::create_dir_all(&folder).map_err(|e| io_error(&folder, e))?;
+        let path = folder.join(METRICS_FILE);
+        let text = serde_json::to_string_pretty(metrics).map_err(|e| TimelineError::Io {
+            path: path.clone(),
+            message: format!("cannot serialise the metrics: {e}"),
+        })?;
+        write_atomic(&path, |w| std::io::Write::write_all(w, text.as_bytes()))?;
+        self.project.surveys[index].metrics = Some(self.relative(&path));
+        Ok(path)
+    }
+
+    /// Saves the model the viewer shows as the model of the survey of `dataset` (a bare model,
+    /// `None`, is a survey without a dataset), adding that survey when the project has none for
+    /// it: named after the dataset folder, dated today (or the latest survey's date when that is
+    /// later). Writes the model and `twin.ron`, the project file last, so an interrupted save
+    /// never names a model that is not there. Returns the survey's name.
+    pub fn save_survey_model(
+        &mut self,
+        dataset: Option<&Path>,
+        splats: &Splats,
+    ) -> Result<String, TimelineError> {
+        let existing = match dataset {
+            Some(root) => self.survey_of_dataset(root).map(|s| s.name.clone()),
+            None => self
+                .project
+                .surveys
+                .iter()
+                .find(|s| s.dataset.as_os_str().is_empty())
+                .map(|s| s.name.clone()),
+        };
+        let name = match existing {
+            Some(name) => name,
+            None => {
+                let base = dataset
+                    .and_then(|d| d.file_name())
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .filter(|n| !n.is_empty())
+                    .unwrap_or_else(|| "survey".into());
+                let name = self.unused_name(&base);
+                let mut date = today();
+                if let Some(latest) = self.project.surveys.last()
+                    && latest.date > date
+                {
+                    date = latest.date.clone();
+                }
+                let stored = dataset.map(|d| self.relative(d)).unwrap_or_default();
+                self.project
+                    .add_survey(Survey {
+                        name: name.clone(),
+                        date,
+                        dataset: stored,
+                        model: None,
+                        metrics: None,
+                    })
+                    .map_err(|source| TimelineError::Survey {
+                        file: self.file(),
+                        source,
+                    })?;
+                name
+            }
+        };
+        self.save_model(&name, splats)?;
+        self.save()?;
+        Ok(name)
+    }
+
+    /// A survey name not yet used: `base`, else `base-2`, `base-3`, …
+    pub fn unused_name(&self, base: &str) -> String {
+        let taken = |n: &str| self.project.surveys.iter().any(|s| s.name == n);
+        if !taken(base) {
+            return base.to_string();
+        }
+        (2..)
+            .map(|i| format!("{base}-{i}"))
+            .find(|n| !taken(n))
+            .unwrap_or_else(|| base.to_string())
+    }
+}
+
+fn io_error(path: &Path, e: std::io::Error) -> TimelineError {
+    TimelineError::Io {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+/// `path` made absolute against the current folder and cleaned of `.` and `..` (lexically, so
+/// that a folder that does not exist yet still has a place).
+fn absolute(path: &Path) -> std::io::Result<PathBuf> {
+    let joined = std::path::absolute(path)?;
+    let mut out = PathBuf::new();
+    for part in joined.components() {
+        match part {
+            Component::ParentDir => {
+                out.pop();
+            }
+            Component::CurDir => {}
+            other => out.push(other),
+        }
+    }
+    Ok(out)
+}
+
+/// `target` relative to `base` (both absolute and clean), or None when they share no root.
+fn relative_path(target: &Path, base: &Path) -> Option<PathBuf> {
+    let t: Vec<Component> = target.components().collect();
+    let b: Vec<Component> = base.components().collect();
+    if t.first() != b.first() {
+        return None;
+    }
+    let common = t.iter().zip(&b).take_while(|(x, y)| x == y).count();
+    let mut out = PathBuf::new();
+    for _ in common..b.len() {
+        out.push("..");
+    }
+    for part in &t[common..] {
+        out.push(part);
+    }
+    if out.as_os_str().is_empty() {
+        out.push(".");
+    }
+    Some(out)
+}
+
+/// Today's date as `YYYY-MM-DD` (UTC), from the system clock: the default survey date.
+pub fn today() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    civil_date((secs / 86_400) as i64)
+}
+
+/// The proleptic Gregorian date of a day count since 1970-01-01 (Howard Hinnant's
+/// civil-from-days).
+fn civil_date(days: i64) -> String {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!("{y:04}-{m:02}-{d:02}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn civil_dates_match_known_days() {
+        assert_eq!(civil_date(0), "1970-01-01");
+        assert_eq!(civil_date(19_723), "2024-01-01");
+        assert_eq!(civil_date(20_517), "2026-03-05");
+        assert_eq!(today().len(), 10);
+    }
+
+    #[test]
+    fn relative_paths_climb_out_of_the_project() {
+        let p = relative_path(Path::new("/data/lund"), Path::new("/work/twin")).unwrap();
+        assert_eq!(p, PathBuf::from("../../data/lund"));
+        let p = relative_path(Path::new("/work/twin/s1"), Path::new("/work/twin")).unwrap();
+        assert_eq!(p, PathBuf::from("s1"));
+    }
+
+    #[test]
+    fn surveys_keep_their_models_and_paths_are_relative() {
+        let root = tempfile::tempdir().unwrap();
+        let data = root.path().join("data/survey-1");
+        std::fs::create_dir_all(&data).unwrap();
+        let dir = root.path().join("twin");
+        let mut twin = Twin::create(&dir).unwrap();
+        twin.add_survey("survey-1", "2026-03-01", &data).unwrap();
+        twin.add_survey("survey-2", "2026-09-01", &data).unwrap();
+        assert_eq!(
+            twin.survey("survey-1").unwrap().dataset,
+            PathBuf::from("../data/survey-1")
+        );
+        let mut splats = Splats::empty(0, 0);
+        splats.push(
+            glam::Vec3::ZERO,
+            glam::Vec3::ZERO,
+            glam::Quat::IDENTITY,
+            0.0,
+            &[0.1, 0.2, 0.3],
+            &[],
+            0,
+            0,
+        );
+        twin.save_model("survey-1", &splats).unwrap();
+        let first = std::fs::read(dir.join("surveys/survey-1/model.ply")).unwrap();
+        splats.means[0] = glam::Vec3::ONE;
+        twin.save_model("survey-2", &splats).unwrap();
+        twin.save_metrics("survey-2", &serde_json::json!({"psnr": 30.0}))
+            .unwrap();
+        twin.save().unwrap();
+
+        let reopened = Twin::open(&dir.join(PROJECT_FILE)).unwrap();
+        assert_eq!(reopened, twin);
+        assert_eq!(
+            std::fs::read(dir.join("surveys/survey-1/model.ply")).unwrap(),
+            first,
+            "a later survey's save leaves the earlier model's bytes as they were"
+        );
+        assert_eq!(
+            reopened.survey_of_dataset(&data).map(|s| s.name.as_str()),
+            Some("survey-1")
+        );
+        let loaded = reopened.load_model("survey-2").unwrap().unwrap();
+        assert_eq!(loaded.means[0], glam::Vec3::ONE);
+        assert!(matches!(
+            Twin::create(&dir),
+            Err(TimelineError::Exists { .. })
+        ));
+        assert_eq!(reopened.unused_name("survey-1"), "survey-1-2");
+    }
+}
