@@ -2,11 +2,11 @@
 //! 4- and 16-Gaussian scenes of brush's test cases (../shared/data/brush_gsplat_reference,
 //! SOURCE.md: 123×82, fx = fy = 61.5, camera at (0.123, 0.456, -8), identity rotation).
 
-mod gsplat_support;
+mod raster_support;
 
 use damage_twin::raster::{PixelGrads, Rasterizer, RenderOutput, SplatGrads};
 use damage_twin::splats::Splats;
-use gsplat_support::{Case, assert_close, camera, flat_quats_wxyz, flat2, flat3, settings};
+use raster_support::{Case, assert_close, camera, flat_quats_wxyz, flat2, flat3, settings};
 
 fn forward(case: &Case) -> (Rasterizer, RenderOutput, Splats) {
     let splats = case.splats();

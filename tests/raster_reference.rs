@@ -1,68 +1,23 @@
 //! The plain reference rasterizer (`damage_twin::raster::reference`) against gsplat's own
-//! tensors, against central finite differences of itself, and the fast `Rasterizer` (forward and
-//! backward, every output and every gradient) against the reference: on gsplat's two scenes
-//! (with label channels added) and on a seeded random scene with Gaussians behind the near
-//! plane, off screen, in the Jacobian's clamp, huge and tiny, at an image size that is not a
-//! multiple of 16, with the default alpha threshold and with none.
+//! tensors (forward image, projected means, conics and depths, every gradient), against central
+//! finite differences of itself (every parameter lane, through colour, alpha, depth and label
+//! outputs, the SH view direction included), and its rules on hand-made cases. The fast
+//! rasterizer is compared with it in `tests/raster_fast_vs_reference.rs`.
 //!
-//! Tolerances: each was set from the largest error measured on this machine (written beside
-//! it; `cargo test --test raster_reference -- --nocapture` prints them) with a margin.
+//! Each tolerance was set from the largest error measured (written beside it;
+//! `cargo test --test raster_reference -- --nocapture` prints them).
 
-mod gsplat_support;
+mod raster_support;
 
 use damage_twin::raster::reference;
-use damage_twin::raster::{
-    PixelGrads, Projected, Rasterizer, RenderOutput, RenderSettings, SplatGrads,
-};
+use damage_twin::raster::{PixelGrads, RenderSettings, SplatGrads};
 use damage_twin::scene::{Camera, Intrinsics};
 use damage_twin::splats::Splats;
 use damage_twin::splats::model::{SH_C0, logit};
 use glam::{Quat, Vec3};
-use gsplat_support::{Case, assert_close, flat_quats_wxyz, flat2, flat3};
+use raster_support::{Case, Weights, assert_close, flat_quats_wxyz, flat2, flat3, scaled_error};
 
 const LABELS: usize = 3;
-
-/// Per-pixel gradients of a loss (random weights: the loss is their dot product with the
-/// outputs, so they are its gradients too).
-struct Weights {
-    color: Vec<f32>,
-    alpha: Vec<f32>,
-    depth: Vec<f32>,
-    labels: Vec<f32>,
-}
-
-impl Weights {
-    fn random(pixels: usize, labels: usize, seed: u64) -> Weights {
-        let mut rng = fastrand::Rng::with_seed(seed);
-        let mut v =
-            |n: usize, scale: f32| (0..n).map(|_| scale * (2.0 * rng.f32() - 1.0)).collect();
-        Weights {
-            color: v(pixels * 3, 1.0),
-            alpha: v(pixels, 1.0),
-            depth: v(pixels, 0.2),
-            labels: v(pixels * labels, 1.0),
-        }
-    }
-
-    fn pixel_grads(&self) -> PixelGrads<'_> {
-        PixelGrads {
-            color: &self.color,
-            alpha: Some(&self.alpha),
-            depth: Some(&self.depth),
-            labels: Some(&self.labels),
-        }
-    }
-
-    fn loss(&self, out: &RenderOutput) -> f64 {
-        let dot = |a: &[f32], b: &[f32]| -> f64 {
-            a.iter().zip(b).map(|(x, y)| *x as f64 * *y as f64).sum()
-        };
-        dot(&out.color, &self.color)
-            + dot(&out.alpha, &self.alpha)
-            + dot(&out.depth, &self.depth)
-            + dot(&out.labels, &self.labels)
-    }
-}
 
 // ---------------------------------------------------------------------------------------------
 // The reference against gsplat.
@@ -71,7 +26,7 @@ impl Weights {
 fn reference_matches_gsplat(name: &str) {
     let case = Case::load(name);
     let splats = case.splats();
-    let (camera, settings) = (gsplat_support::camera(), gsplat_support::settings());
+    let (camera, settings) = (raster_support::camera(), raster_support::settings());
     let (out, projected) = reference::render(&splats, &camera, &settings);
     assert!(projected.radii.iter().all(|&r| r > 0), "all visible");
     let rgba: Vec<f32> = (0..out.alpha.len())
@@ -126,346 +81,12 @@ fn reference_matches_gsplat(name: &str) {
 
 #[test]
 fn reference_matches_gsplat_on_the_tiny_case() {
-    reference_matches_gsplat(gsplat_support::CASES[0]);
+    reference_matches_gsplat(raster_support::CASES[0]);
 }
 
 #[test]
 fn reference_matches_gsplat_on_the_basic_case() {
-    reference_matches_gsplat(gsplat_support::CASES[1]);
-}
-
-// ---------------------------------------------------------------------------------------------
-// The fast rasterizer against the reference.
-// ---------------------------------------------------------------------------------------------
-
-/// 150 × 97: neither side a multiple of 16, so the last tile column and row reach past the image.
-fn random_camera() -> Camera {
-    let k = Intrinsics {
-        width: 150,
-        height: 97,
-        fx: 140.0,
-        fy: 138.0,
-        cx: 74.3,
-        cy: 49.1,
-    };
-    Camera::look_at(
-        k,
-        Vec3::new(0.4, -0.6, -5.0),
-        Vec3::new(0.0, 0.1, 0.0),
-        Vec3::NEG_Y,
-    )
-}
-
-/// A seeded scene of `n` Gaussians with [`LABELS`] label channels seen by [`random_camera`]:
-/// most in a box before the camera, and a share of each kind that exercises a rule: behind the
-/// near plane (culled), far off screen (culled), just outside the field of view but large
-/// enough to reach into it (the Jacobian's 1.3 × fov clamp, where `J` uses the limit), huge
-/// (a footprint over much of the image, opacity low enough not to hide the rest), tiny (below
-/// a pixel, so the 0.3 px² blur dominates) and nearly opaque (alpha clamped, early stops).
-fn random_scene(n: usize, seed: u64) -> Splats {
-    let camera = random_camera();
-    let to_world = |p_cam: Vec3| camera.rotation.inverse() * (p_cam - camera.translation);
-    let mut rng = fastrand::Rng::with_seed(seed);
-    let mut u = |lo: f32, hi: f32| lo + (hi - lo) * rng.f32();
-    let mut s = Splats::empty(3, LABELS);
-    for g in 0..n {
-        let kind = g % 20;
-        let mut mean = Vec3::new(u(-2.0, 2.0), u(-1.5, 1.5), u(-1.5, 1.5));
-        let mut log_scale =
-            Vec3::splat(u(0.02, 0.2).ln()) + Vec3::new(u(0.0, 0.6), u(0.0, 0.6), u(0.0, 0.6));
-        let mut opacity = u(0.05, 0.95);
-        match kind {
-            // Behind the camera, and between it and the near plane (z in (0, 0.01]).
-            0 => mean = to_world(Vec3::new(u(-1.0, 1.0), u(-1.0, 1.0), u(-3.0, -0.1))),
-            1 => mean = to_world(Vec3::new(u(-0.01, 0.01), u(-0.01, 0.01), u(0.0, 0.01))),
-            // Far off screen to the side: culled by the on-screen test.
-            2 => mean = to_world(Vec3::new(u(8.0, 12.0), u(-1.0, 1.0), u(3.0, 6.0))),
-            // Beyond the clamp (|x / z| > about 0.7 here) but wide enough to reach the image.
-            3 => {
-                let side = if u(0.0, 1.0) < 0.5 { -1.0 } else { 1.0 };
-                let z = u(3.5, 6.0);
-                mean = to_world(Vec3::new(side * u(0.8, 1.0) * z, u(-0.5, 0.5), z));
-                log_scale = Vec3::splat(u(0.6, 1.2).ln());
-            }
-            // Huge: a few units wide, near the camera.
-            4 => {
-                log_scale = Vec3::splat(u(1.0, 2.5).ln());
-                opacity = u(0.05, 0.3);
-            }
-            // Tiny: well below a pixel.
-            5 => log_scale = Vec3::splat(u(5e-4, 2e-3).ln()),
-            // Nearly opaque: alpha clamped at alpha_max near the centre, and pixels behind a few
-            // of them stop early.
-            6..=9 => opacity = u(0.993, 0.9999),
-            _ => {}
-        }
-        let q = Quat::from_xyzw(u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0), u(-1.0, 1.0));
-        // Un-normalised on purpose: the gradient must chain through the normalisation.
-        let q = q * (u(0.5, 2.0) / q.length());
-        let mut sh = [0.0f32; 48];
-        for (i, c) in sh.iter_mut().enumerate() {
-            // DC colours in about [0.05, 0.95], some channels below the clamp at 0.
-            *c = if i < 3 {
-                u(-0.7, 0.6) / SH_C0
-            } else {
-                u(-0.2, 0.2)
-            };
-        }
-        let labels = [u(-4.0, 4.0), u(-4.0, 4.0), u(-4.0, 4.0)];
-        s.push(
-            mean,
-            log_scale,
-            q,
-            logit(opacity),
-            &sh,
-            &labels,
-            g as u64,
-            0,
-        );
-    }
-    s
-}
-
-/// A tensor's error: its largest absolute difference relative to the tensor's largest
-/// magnitude (the scale summation-order noise is relative to). NaN gives NaN.
-fn scaled_error(got: &[f32], want: &[f32]) -> f32 {
-    assert_eq!(got.len(), want.len());
-    let scale = want.iter().fold(0.0f32, |m, w| m.max(w.abs()));
-    let mut abs = 0.0f32;
-    for (g, w) in got.iter().zip(want) {
-        let e = (g - w).abs();
-        if !(e <= abs) {
-            abs = e;
-        }
-    }
-    abs / scale.max(f32::MIN_POSITIVE)
-}
-
-/// Bounds on [`scaled_error`] between the fast rasterizer and the reference, per stage. The
-/// largest errors measured over the gsplat scenes and the random scene (both thresholds), on
-/// the AVX-512 build and on the AVX2 and baseline builds the rerun test runs:
-/// - projection (means2d, conics, depths, colours, opacities, labels): 4.3e-7 (conics, tiny
-///   case); depths and labels are bit-identical.
-/// - images (colour, alpha, depth, label channels): 1.2e-6 (alpha, tiny case). The fast path's
-///   `exp` is within 2 ulp of the standard library's (`fast_exp.rs`); no pixel of these scenes
-///   had an alpha so close to the threshold, or a transmittance so close to 1e-4, that the two
-///   decided differently (such a pixel would differ by about alpha · colour, over 1e-3).
-/// - gradients (screen-space and per parameter): 3.3e-6 (v_log_scales, tiny case); the
-///   reference sums per Gaussian in f64, the fast path in f32 in tile order.
-const PROJECTION_BOUND: f32 = 2e-6;
-const IMAGE_BOUND: f32 = 5e-6;
-const GRADIENT_BOUND: f32 = 2e-5;
-
-/// Runs both rasterizers on one scene, forward and backward (random weights on every output
-/// as the pixel gradients), and checks every output and gradient against its bound.
-fn compare_fast_with_reference(
-    name: &str,
-    splats: &Splats,
-    camera: &Camera,
-    settings: &RenderSettings,
-    seed: u64,
-) {
-    let (r_out, r_p) = reference::render(splats, camera, settings);
-    let mut fast = Rasterizer::new();
-    let mut f_out = RenderOutput::default();
-    fast.forward(splats, camera, settings, &mut f_out);
-    let f_p: Projected = fast.projected().clone();
-    assert_eq!(f_p.radii, r_p.radii, "{name}: radii (culling) differ");
-    assert_eq!(
-        f_p.color_pass, r_p.color_pass,
-        "{name}: colour clamps differ"
-    );
-    let k = &camera.intrinsics;
-    let w = Weights::random((k.width * k.height) as usize, splats.label_channels, seed);
-    let mut f_g = SplatGrads::zeros(splats);
-    fast.backward_pixels(splats, camera, settings, &w.pixel_grads(), &mut f_g);
-    let f_s = fast.screen_grads();
-    let (r_g, r_s) = reference::backward(splats, camera, settings, &w.pixel_grads());
-    assert_eq!(f_g.visible, r_g.visible, "{name}: visible differs");
-
-    let (pb, ib, gb) = (PROJECTION_BOUND, IMAGE_BOUND, GRADIENT_BOUND);
-    let q = flat_quats_wxyz;
-    let rows: Vec<(&str, Vec<f32>, Vec<f32>, f32)> = vec![
-        ("means2d", flat2(&f_p.means2d), flat2(&r_p.means2d), pb),
-        ("conics", flat3(&f_p.conics), flat3(&r_p.conics), pb),
-        ("depths", f_p.depths.clone(), r_p.depths.clone(), pb),
-        ("colors", flat3(&f_p.colors), flat3(&r_p.colors), pb),
-        (
-            "opacities",
-            f_p.opacities.clone(),
-            r_p.opacities.clone(),
-            pb,
-        ),
-        ("labels", f_p.labels.clone(), r_p.labels.clone(), pb),
-        ("color", f_out.color.clone(), r_out.color.clone(), ib),
-        ("alpha", f_out.alpha.clone(), r_out.alpha.clone(), ib),
-        ("depth", f_out.depth.clone(), r_out.depth.clone(), ib),
-        (
-            "label channels",
-            f_out.labels.clone(),
-            r_out.labels.clone(),
-            ib,
-        ),
-        (
-            "v_means2d",
-            flat2(&f_s.v_means2d),
-            flat2(&r_s.v_means2d),
-            gb,
-        ),
-        ("v_conics", flat3(&f_s.v_conics), flat3(&r_s.v_conics), gb),
-        ("v_colors", flat3(&f_s.v_colors), flat3(&r_s.v_colors), gb),
-        (
-            "v_opacities",
-            f_s.v_opacities.clone(),
-            r_s.v_opacities.clone(),
-            gb,
-        ),
-        ("v_depths", f_s.v_depths.clone(), r_s.v_depths.clone(), gb),
-        ("v_labels", f_s.v_labels.clone(), r_s.v_labels.clone(), gb),
-        ("v_means", flat3(&f_g.v_means), flat3(&r_g.v_means), gb),
-        (
-            "v_log_scales",
-            flat3(&f_g.v_log_scales),
-            flat3(&r_g.v_log_scales),
-            gb,
-        ),
-        ("v_rotations", q(&f_g.v_rotations), q(&r_g.v_rotations), gb),
-        (
-            "v_raw_opacities",
-            f_g.v_raw_opacities.clone(),
-            r_g.v_raw_opacities.clone(),
-            gb,
-        ),
-        ("v_sh", f_g.v_sh.clone(), r_g.v_sh.clone(), gb),
-        (
-            "v_raw_labels",
-            f_g.v_raw_labels.clone(),
-            r_g.v_raw_labels.clone(),
-            gb,
-        ),
-        (
-            "v_means2d_norm",
-            f_g.v_means2d_norm.clone(),
-            r_g.v_means2d_norm.clone(),
-            gb,
-        ),
-    ];
-    let mut failures = Vec::new();
-    for (what, fast, reference, bound) in &rows {
-        let scaled = scaled_error(fast, reference);
-        eprintln!("{name}: {what:>16}: scaled error {scaled:.3e} (bound {bound:.0e})");
-        if !(scaled <= *bound) {
-            failures.push(format!("{what}: {scaled:.3e} > {bound:.0e}"));
-        }
-    }
-    assert!(failures.is_empty(), "{name}: {failures:?}");
-}
-
-fn with_labels(case: &Case, seed: u64) -> Splats {
-    let mut rng = fastrand::Rng::with_seed(seed);
-    case.splats_with_labels(LABELS, |_, _| rng.f32() * 8.0 - 4.0)
-}
-
-#[test]
-fn fast_rasterizer_matches_the_reference_on_the_gsplat_scenes() {
-    for (i, name) in gsplat_support::CASES.iter().enumerate() {
-        let case = Case::load(name);
-        let splats = with_labels(&case, i as u64);
-        for sh_direction_grad in [false, true] {
-            let settings = RenderSettings {
-                background: Vec3::new(0.3, 0.1, 0.7),
-                sh_direction_grad,
-                ..gsplat_support::settings()
-            };
-            compare_fast_with_reference(
-                name,
-                &splats,
-                &gsplat_support::camera(),
-                &settings,
-                10 + i as u64,
-            );
-        }
-    }
-}
-
-/// What the random scene exercises, from the reference's own projection and blend: fails if a
-/// change to [`random_scene`] stops covering a rule.
-fn assert_random_scene_covers_every_rule(splats: &Splats, settings: &RenderSettings) {
-    let camera = random_camera();
-    let (_, projected) = reference::render(splats, &camera, settings);
-    let radius = |g: usize| projected.radii[g];
-    let kind = |k: usize| (0..splats.len()).filter(move |g| g % 20 == k);
-    assert!(
-        kind(0)
-            .chain(kind(1))
-            .chain(kind(2))
-            .all(|g| radius(g) == 0)
-    );
-    let (w, h) = (camera.intrinsics.width, camera.intrinsics.height);
-    let clamped_and_visible = kind(3)
-        .filter(|&g| {
-            let p = camera.world_to_camera(splats.means[g]);
-            radius(g) > 0 && !(-0.7 * p.z..0.7 * p.z).contains(&p.x)
-        })
-        .count();
-    assert!(
-        clamped_and_visible >= 5,
-        "{clamped_and_visible} clamped Gaussians visible"
-    );
-    assert!(
-        kind(4).all(|g| radius(g) > w / 3),
-        "huge ones span over a third of the image"
-    );
-    assert!(
-        kind(5).all(|g| radius(g) > 0 && radius(g) <= 2),
-        "tiny ones stay below 2 px"
-    );
-    let tiles = reference::TileLists::new(&projected, w, h);
-    let (mut stopped, mut clamped_alpha) = (0, 0);
-    for y in 0..h {
-        for x in 0..w {
-            let blend = reference::blend_pixel(&projected, &tiles, x, y, settings);
-            stopped += blend.stopped as usize;
-            clamped_alpha += blend
-                .blended
-                .iter()
-                .filter(|b| b.raw_alpha > b.alpha)
-                .count();
-        }
-    }
-    eprintln!("{stopped} pixels stopped early, {clamped_alpha} blends clamped at alpha_max");
-    assert!(stopped > 100 && clamped_alpha > 20);
-}
-
-#[test]
-fn fast_rasterizer_matches_the_reference_on_a_random_scene() {
-    let splats = random_scene(400, 7);
-    let camera = random_camera();
-    for alpha_threshold in [1.0 / 255.0, 0.0] {
-        let settings = RenderSettings {
-            background: Vec3::new(0.2, 0.5, 0.9),
-            alpha_threshold,
-            ..Default::default()
-        };
-        assert_random_scene_covers_every_rule(&splats, &settings);
-        let name = format!("random, threshold {alpha_threshold}");
-        compare_fast_with_reference(&name, &splats, &camera, &settings, 20);
-    }
-}
-
-#[test]
-fn simd_build_follows_the_environment() {
-    damage_twin::simd::assert_level_follows_the_environment();
-}
-
-/// The fast rasterizer's comparisons with the kernels machines without AVX-512 or AVX2 run.
-#[test]
-fn fast_rasterizer_matches_the_reference_on_the_lower_simd_builds() {
-    damage_twin::simd::rerun_tests_on_lower_builds(&[
-        "simd_build_follows_the_environment",
-        "fast_rasterizer_matches_the_reference_on_the_gsplat_scenes",
-        "fast_rasterizer_matches_the_reference_on_a_random_scene",
-    ]);
+    reference_matches_gsplat(raster_support::CASES[1]);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -715,4 +336,149 @@ fn reference_gradients_match_central_finite_differences() {
             "a 5 % gradient error must fail the check"
         );
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The reference's rules on hand-made cases.
+// ---------------------------------------------------------------------------------------------
+
+/// A projected frame of Gaussians given by `(mean2d, conic, depth, radius, opacity)`, white,
+/// without labels.
+fn hand_made(gaussians: &[(glam::Vec2, Vec3, f32, u32, f32)]) -> damage_twin::raster::Projected {
+    let mut p = damage_twin::raster::Projected::default();
+    for &(mean2d, conic, depth, radius, opacity) in gaussians {
+        p.means2d.push(mean2d);
+        p.conics.push(conic);
+        p.depths.push(depth);
+        p.radii.push(radius);
+        p.colors.push(Vec3::ONE);
+        p.color_pass.push(7);
+        p.opacities.push(opacity);
+        p.extents.push(glam::Vec2::splat(f32::INFINITY));
+    }
+    p
+}
+
+#[test]
+fn an_isotropic_gaussian_on_the_axis_projects_to_the_textbook_footprint() {
+    // Camera at the origin looking along +z, fx = fy = 100; the Gaussian 5 ahead with σ = 0.1:
+    // σ_px = 100 · 0.1 / 5 = 2 px, so Σ' = (4 + 0.3) I (eq. 5 plus the blur) and the radius is
+    // ceil(3 sqrt(4.3 + 0.1)) = 7 (gsplat's 0.01 floor under the discriminant).
+    let k = Intrinsics {
+        width: 64,
+        height: 48,
+        fx: 100.0,
+        fy: 100.0,
+        cx: 32.0,
+        cy: 24.0,
+    };
+    let camera = Camera::new(k, Quat::IDENTITY, Vec3::ZERO);
+    let mut splats = Splats::empty(0, 1);
+    let rotation = Quat::from_rotation_y(0.7) * 2.0;
+    let (dc, raw_opacity, raw_label) = ([0.4, -0.2, -3.0], 0.3, -1.2);
+    let log_scale = Vec3::splat(0.1f32.ln());
+    splats.push(
+        Vec3::new(0.0, 0.0, 5.0),
+        log_scale,
+        rotation,
+        raw_opacity,
+        &dc,
+        &[raw_label],
+        0,
+        0,
+    );
+    let p = reference::project(&splats, &camera, &RenderSettings::default());
+    let close = |a: f32, b: f32| (a - b).abs() <= 1e-6 * b.abs().max(1.0);
+    assert_eq!(p.radii, [7]);
+    assert!(close(p.means2d[0].x, 32.0) && close(p.means2d[0].y, 24.0));
+    assert!(close(p.conics[0].x, 1.0 / 4.3) && close(p.conics[0].z, 1.0 / 4.3));
+    assert!(p.conics[0].y.abs() < 1e-7);
+    assert_eq!(p.depths, [5.0]);
+    let sigmoid = |x: f32| 1.0 / (1.0 + (-x).exp());
+    assert!(close(p.opacities[0], sigmoid(raw_opacity)));
+    assert!(close(p.labels[0], sigmoid(raw_label)));
+    // Colour max(SH_C0 · dc + 0.5, 0); the blue channel is clamped, so its bit is clear.
+    assert!(close(p.colors[0].x, SH_C0 * 0.4 + 0.5) && close(p.colors[0].y, 0.5 - SH_C0 * 0.2));
+    assert_eq!((p.colors[0].z, p.color_pass[0]), (0.0, 0b011));
+}
+
+#[test]
+fn tiles_list_the_gaussians_whose_radius_rectangle_covers_them_by_depth_then_index() {
+    let (mean, conic) = (glam::Vec2::new(10.0, 8.0), Vec3::new(0.1, 0.0, 0.1));
+    let p = hand_made(&[
+        (mean, conic, 3.0, 4, 0.5),
+        (mean, conic, 1.0, 4, 0.5),
+        (mean, conic, 3.0, 4, 0.5),
+        // Reaches only the second tile column (x from 20 to 28).
+        (glam::Vec2::new(24.0, 8.0), conic, 0.5, 4, 0.5),
+        // Culled.
+        (mean, conic, 0.1, 0, 0.5),
+    ]);
+    let tiles = reference::TileLists::new(&p, 40, 20);
+    assert_eq!((tiles.tiles_x, tiles.tiles_y), (3, 2));
+    assert_eq!(tiles.at_pixel(5, 5), [1, 0, 2]);
+    assert_eq!(tiles.at_pixel(17, 5), [3]);
+    assert!(tiles.at_pixel(5, 17).is_empty());
+}
+
+#[test]
+fn a_gaussian_blends_nowhere_outside_its_radius_rectangle() {
+    // Wide (σ = 10 px) but with radius 4: its rectangle covers tile column 0 only. At pixel 17
+    // its alpha, 0.9 · exp(-0.5 · 7.5² / 100), would pass the threshold, yet gsplat (and the
+    // fast path) never look at it there.
+    let p = hand_made(&[(
+        glam::Vec2::new(10.0, 8.0),
+        Vec3::new(0.01, 0.0, 0.01),
+        2.0,
+        4,
+        0.9,
+    )]);
+    let tiles = reference::TileLists::new(&p, 40, 20);
+    let settings = RenderSettings::default();
+    assert_eq!(
+        reference::blend_pixel(&p, &tiles, 15, 8, &settings)
+            .blended
+            .len(),
+        1
+    );
+    assert!(
+        reference::blend_pixel(&p, &tiles, 17, 8, &settings)
+            .blended
+            .is_empty()
+    );
+}
+
+#[test]
+fn a_pixel_skips_faint_gaussians_and_stops_before_the_one_that_would_end_it() {
+    let (mean, conic) = (glam::Vec2::new(4.5, 4.5), Vec3::new(0.5, 0.0, 0.5));
+    let p = hand_made(&[
+        // Front: alpha 1/300 < 1/255, skipped.
+        (mean, conic, 1.0, 3, 1.0 / 300.0),
+        // Alpha 0.99 (clamped from 0.995): T = 0.01 behind it.
+        (mean, conic, 2.0, 3, 0.995),
+        // Would take T to 0.01 · 0.01 = 1e-4 <= 1e-4: the pixel stops, this one unblended.
+        (mean, conic, 3.0, 3, 0.99),
+        (mean, conic, 4.0, 3, 0.5),
+    ]);
+    let tiles = reference::TileLists::new(&p, 16, 16);
+    let settings = RenderSettings::default();
+    let pixel = reference::blend_pixel(&p, &tiles, 4, 4, &settings);
+    let blended: Vec<usize> = pixel.blended.iter().map(|b| b.gaussian).collect();
+    assert_eq!(blended, [1]);
+    assert!(pixel.stopped);
+    assert_eq!(
+        (pixel.blended[0].raw_alpha, pixel.blended[0].alpha),
+        (0.995, 0.99)
+    );
+    assert_eq!(pixel.final_transmittance, 1.0 - 0.99f32);
+    // With no threshold the faint one blends too.
+    let no_threshold = RenderSettings {
+        alpha_threshold: 0.0,
+        ..settings
+    };
+    let pixel = reference::blend_pixel(&p, &tiles, 4, 4, &no_threshold);
+    assert_eq!(
+        pixel.blended.iter().map(|b| b.gaussian).collect::<Vec<_>>(),
+        [0, 1]
+    );
 }

@@ -1,13 +1,13 @@
-//! Shared by the tests against gsplat's tensors for the 4- and 16-Gaussian scenes of brush's
+//! Shared by the rasterizer tests: gsplat's tensors for the 4- and 16-Gaussian scenes of brush's
 //! test cases (`../shared/data/brush_gsplat_reference`, SOURCE.md: 123×82, fx = fy = 61.5,
-//! camera at (0.123, 0.456, -8), identity rotation): the loader, the camera, gsplat's settings
-//! and brush's comparison.
+//! camera at (0.123, 0.456, -8), identity rotation) with their loader, camera, gsplat's settings
+//! and brush's comparison; random per-pixel loss weights; tensor flattening and errors.
 #![allow(dead_code)]
 
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-use damage_twin::raster::RenderSettings;
+use damage_twin::raster::{PixelGrads, RenderOutput, RenderSettings};
 use damage_twin::scene::{Camera, Intrinsics};
 use damage_twin::splats::Splats;
 use glam::{Quat, Vec3};
@@ -145,8 +145,22 @@ pub fn assert_close(what: &str, got: &[f32], want: &[f32], atol: f32, rtol: f32)
     }
 }
 
-/// gsplat's gradient tensors and their keys, from `SplatGrads`-like slices: `v_xy` and
-/// `v_conics` are screen-space, the rest per parameter (quaternions in gsplat's w, x, y, z).
+/// A tensor's error: its largest absolute difference relative to the tensor's largest
+/// magnitude (the scale summation-order noise is relative to). NaN gives NaN.
+pub fn scaled_error(got: &[f32], want: &[f32]) -> f32 {
+    assert_eq!(got.len(), want.len());
+    let scale = want.iter().fold(0.0f32, |m, w| m.max(w.abs()));
+    let mut abs = 0.0f32;
+    for (g, w) in got.iter().zip(want) {
+        let e = (g - w).abs();
+        if !(e <= abs) {
+            abs = e;
+        }
+    }
+    abs / scale.max(f32::MIN_POSITIVE)
+}
+
+/// Flattened tensors in gsplat's layouts (quaternions in its order w, x, y, z).
 pub fn flat2(v: &[glam::Vec2]) -> Vec<f32> {
     v.iter().flat_map(|m| [m.x, m.y]).collect()
 }
@@ -157,4 +171,46 @@ pub fn flat3(v: &[Vec3]) -> Vec<f32> {
 
 pub fn flat_quats_wxyz(v: &[glam::Vec4]) -> Vec<f32> {
     v.iter().flat_map(|q| [q.w, q.x, q.y, q.z]).collect()
+}
+
+/// Per-pixel gradients of a loss (random weights: the loss is their dot product with the
+/// outputs, so they are its gradients too).
+pub struct Weights {
+    pub color: Vec<f32>,
+    pub alpha: Vec<f32>,
+    pub depth: Vec<f32>,
+    pub labels: Vec<f32>,
+}
+
+impl Weights {
+    pub fn random(pixels: usize, labels: usize, seed: u64) -> Weights {
+        let mut rng = fastrand::Rng::with_seed(seed);
+        let mut v =
+            |n: usize, scale: f32| (0..n).map(|_| scale * (2.0 * rng.f32() - 1.0)).collect();
+        Weights {
+            color: v(pixels * 3, 1.0),
+            alpha: v(pixels, 1.0),
+            depth: v(pixels, 0.2),
+            labels: v(pixels * labels, 1.0),
+        }
+    }
+
+    pub fn pixel_grads(&self) -> PixelGrads<'_> {
+        PixelGrads {
+            color: &self.color,
+            alpha: Some(&self.alpha),
+            depth: Some(&self.depth),
+            labels: Some(&self.labels),
+        }
+    }
+
+    pub fn loss(&self, out: &RenderOutput) -> f64 {
+        let dot = |a: &[f32], b: &[f32]| -> f64 {
+            a.iter().zip(b).map(|(x, y)| *x as f64 * *y as f64).sum()
+        };
+        dot(&out.color, &self.color)
+            + dot(&out.alpha, &self.alpha)
+            + dot(&out.depth, &self.depth)
+            + dot(&out.labels, &self.labels)
+    }
 }
