@@ -2,121 +2,11 @@
 //! 4- and 16-Gaussian scenes of brush's test cases (../shared/data/brush_gsplat_reference,
 //! SOURCE.md: 123×82, fx = fy = 61.5, camera at (0.123, 0.456, -8), identity rotation).
 
-use std::collections::HashMap;
-use std::path::PathBuf;
+mod raster_support;
 
-use damage_twin::raster::{PixelGrads, Rasterizer, RenderOutput, RenderSettings, SplatGrads};
-use damage_twin::scene::{Camera, Intrinsics};
+use damage_twin::raster::{PixelGrads, Rasterizer, RenderOutput, SplatGrads};
 use damage_twin::splats::Splats;
-use glam::{Quat, Vec3};
-
-const W: u32 = 123;
-const H: u32 = 82;
-
-struct Case {
-    tensors: HashMap<String, Vec<f32>>,
-}
-
-impl Case {
-    fn load(name: &str) -> Case {
-        let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../shared/data/brush_gsplat_reference")
-            .join(name);
-        let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        let st = safetensors::SafeTensors::deserialize(&bytes).expect("valid safetensors");
-        let mut tensors = HashMap::new();
-        for (key, view) in st.tensors() {
-            assert_eq!(view.dtype(), safetensors::Dtype::F32, "{key}");
-            let values = view
-                .data()
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect();
-            tensors.insert(key, values);
-        }
-        Case { tensors }
-    }
-
-    fn get(&self, key: &str) -> &[f32] {
-        &self.tensors[key]
-    }
-
-    fn splats(&self) -> Splats {
-        let means = self.get("means");
-        let n = means.len() / 3;
-        let mut s = Splats::empty(3, 0);
-        for g in 0..n {
-            let v3 = |key: &str| {
-                let t = self.get(key);
-                Vec3::new(t[g * 3], t[g * 3 + 1], t[g * 3 + 2])
-            };
-            let q = &self.get("quats")[g * 4..g * 4 + 4]; // w x y z
-            s.push(
-                v3("means"),
-                v3("scales"),
-                Quat::from_xyzw(q[1], q[2], q[3], q[0]),
-                self.get("opacities")[g],
-                &self.get("coeffs")[g * 48..(g + 1) * 48],
-                &[],
-                g as u64,
-                0,
-            );
-        }
-        s
-    }
-}
-
-fn camera() -> Camera {
-    let k = Intrinsics {
-        width: W,
-        height: H,
-        fx: 61.5,
-        fy: 61.5,
-        cx: W as f32 / 2.0,
-        cy: H as f32 / 2.0,
-    };
-    Camera::new(k, Quat::IDENTITY, -Vec3::new(0.123, 0.456, -8.0))
-}
-
-/// gsplat's settings: alpha clamp 0.999, SH view direction detached, black background.
-fn settings() -> RenderSettings {
-    RenderSettings {
-        background: Vec3::ZERO,
-        sh_degree: 3,
-        alpha_max: 0.999,
-        alpha_threshold: 1.0 / 255.0,
-        sh_direction_grad: false,
-    }
-}
-
-/// Largest absolute error, and largest relative error among values above 1 % of the tensor's
-/// largest magnitude (smaller ones are dominated by summation-order noise).
-fn errors(got: &[f32], want: &[f32]) -> (f32, f32) {
-    assert_eq!(got.len(), want.len());
-    let scale = want.iter().fold(0.0f32, |m, w| m.max(w.abs()));
-    let mut abs = 0.0f32;
-    let mut rel = 0.0f32;
-    for (g, w) in got.iter().zip(want) {
-        let e = (g - w).abs();
-        abs = abs.max(e);
-        if w.abs() > 1e-2 * scale {
-            rel = rel.max(e / w.abs());
-        }
-    }
-    (abs, rel)
-}
-
-/// brush's own criterion: |a - b| < 1e-5 + 1e-2 |b| per value.
-fn assert_close(what: &str, got: &[f32], want: &[f32], atol: f32, rtol: f32) {
-    let (abs, rel) = errors(got, want);
-    eprintln!("{what}: max abs error {abs:.3e}, max rel error {rel:.3e}");
-    for (i, (g, w)) in got.iter().zip(want).enumerate() {
-        assert!(
-            (g - w).abs() <= atol + rtol * w.abs(),
-            "{what}[{i}]: got {g}, gsplat {w} (tolerance {atol} + {rtol}·|b|)"
-        );
-    }
-}
+use raster_support::{Case, assert_close, camera, flat_quats_wxyz, flat2, flat3, settings};
 
 fn forward(case: &Case) -> (Rasterizer, RenderOutput, Splats) {
     let splats = case.splats();
@@ -142,8 +32,8 @@ fn check_forward(name: &str) {
         1e-2,
     );
     let p = raster.projected();
-    let xys: Vec<f32> = p.means2d.iter().flat_map(|m| [m.x, m.y]).collect();
-    let conics: Vec<f32> = p.conics.iter().flat_map(|c| [c.x, c.y, c.z]).collect();
+    let xys = flat2(&p.means2d);
+    let conics = flat3(&p.conics);
     assert_close(&format!("{name} xys"), &xys, case.get("xys"), 1e-5, 1e-2);
     assert_close(
         &format!("{name} conics"),
@@ -178,14 +68,7 @@ fn basic_case_forward_matches_gsplat() {
 fn check_gradients(name: &str, tol: &GradTolerances) {
     let case = Case::load(name);
     let (mut raster, _out, splats) = forward(&case);
-    let v_img = case.get("v_out_img");
-    let pixels = (W * H) as usize;
-    let mut v_color = Vec::with_capacity(pixels * 3);
-    let mut v_alpha = Vec::with_capacity(pixels);
-    for p in 0..pixels {
-        v_color.extend_from_slice(&v_img[p * 4..p * 4 + 3]);
-        v_alpha.push(v_img[p * 4 + 3]);
-    }
+    let (v_color, v_alpha) = case.pixel_grads();
     let mut grads = SplatGrads::zeros(&splats);
     let v_out = PixelGrads {
         color: &v_color,
@@ -195,13 +78,8 @@ fn check_gradients(name: &str, tol: &GradTolerances) {
     };
     raster.backward_pixels(&splats, &camera(), &settings(), &v_out, &mut grads);
     let screen = raster.screen_grads();
-    let flat3 = |v: &[Vec3]| v.iter().flat_map(|m| [m.x, m.y, m.z]).collect::<Vec<f32>>();
-    let v_xy: Vec<f32> = screen.v_means2d.iter().flat_map(|m| [m.x, m.y]).collect();
-    let v_quats: Vec<f32> = grads
-        .v_rotations
-        .iter()
-        .flat_map(|q| [q.w, q.x, q.y, q.z])
-        .collect();
+    let v_xy = flat2(&screen.v_means2d);
+    let v_quats = flat_quats_wxyz(&grads.v_rotations);
     let checks: [(&str, Vec<f32>, f32, f32); 7] = [
         ("v_xy", v_xy, tol.atol, tol.rtol),
         ("v_conics", flat3(&screen.v_conics), tol.atol, tol.rtol),

@@ -1,7 +1,9 @@
-//! The CPU reference renderer (classic 3DGS / gsplat maths) and its exact backward pass.
+//! The CPU renderer (classic 3DGS / gsplat maths) and its exact backward pass.
 //! Stages, one per file: project → bin (tile intersection + depth sort) → segments (which row
 //! segments each intersection can touch) → rasterize forward; rasterize backward (replaying what
-//! the forward stored in the segment store) → project backward. It must not know about files, losses or optimisers.
+//! the forward stored in the segment store) → project backward. Beside them, [`reference`] is the
+//! same maths written plainly, one pixel at a time, that the fast stages are tested against.
+//! It must not know about files, losses or optimisers.
 
 mod backend;
 mod bin;
@@ -12,6 +14,8 @@ mod lanes;
 mod project;
 mod project_backward;
 mod raster_backward;
+pub mod reference;
+mod reference_backward;
 mod segments;
 #[cfg(test)]
 mod tests;
