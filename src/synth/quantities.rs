@@ -152,22 +152,24 @@ pub fn measure(
             totals.new_regions += 1;
         }
         let get = |v: Option<f32>| v.unwrap_or(0.0) as f64;
-        match r.class.as_str() {
-            "crack" => {
+        match DamageClass::from_id(&r.class) {
+            Some(DamageClass::Crack) => {
                 totals.cracks += 1;
                 crack += get(r.length_m);
                 polyline += get(r.polyline_length_m);
             }
-            "spalling" => {
+            Some(DamageClass::Spalling) => {
                 totals.spalls += 1;
                 spall += get(r.area_m2);
                 outline += get(r.outline_area_m2);
             }
-            _ => {
+            Some(DamageClass::Rebar) => {
                 totals.rebar += 1;
                 rebar += get(r.length_m);
                 rebar_area += get(r.area_m2);
             }
+            // Every region is made with a class id just above.
+            None => {}
         }
     }
     totals.crack_length_m = crack as f32;
