@@ -92,3 +92,39 @@ fn same_seed_gives_identical_files_and_mask_noise_only_touches_the_chosen_views(
         );
     }
 }
+
+#[test]
+fn joint_frame_runs_are_identical_and_keep_survey_1_as_the_same_frame_run_writes_it() {
+    let joint = |out: &Path| SynthParams {
+        survey2_frame: synth::Survey2Frame::Joint,
+        ..params(out, 0.5)
+    };
+    let a = tempfile::tempdir().unwrap();
+    let b = tempfile::tempdir().unwrap();
+    let same = tempfile::tempdir().unwrap();
+    synth::generate(&joint(a.path()), &|_, _| {}).unwrap();
+    synth::generate(&joint(b.path()), &|_, _| {}).unwrap();
+    synth::generate(&params(same.path(), 0.5), &|_, _| {}).unwrap();
+    let (fa, fb, fs) = (files(a.path()), files(b.path()), files(same.path()));
+    assert_eq!(fa.keys().collect::<Vec<_>>(), fb.keys().collect::<Vec<_>>());
+    for (path, bytes) in fa
+        .iter()
+        .filter(|(p, _)| !p.ends_with("truth/manifest.ron"))
+    {
+        assert!(
+            &fb[path] == bytes,
+            "{} differs between runs",
+            path.display()
+        );
+        if path.starts_with("survey-1") {
+            assert!(
+                &fs[path] == bytes,
+                "{} differs from the same-frame run",
+                path.display()
+            );
+        }
+    }
+    assert!(fa.contains_key(Path::new("survey-2/truth/joint_frame.json")));
+    assert!(fa.contains_key(Path::new("survey-2/images/new-view-001.png")));
+    assert!(fa.contains_key(Path::new("survey-2/images/view-003.png")));
+}

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use damage_twin::damage::DamageClass;
-use damage_twin::synth::{self, SynthParams};
+use damage_twin::synth::{self, Survey2Frame, SynthParams};
 use indicatif::{ProgressBar, ProgressStyle};
 
 #[derive(clap::Args, Debug)]
@@ -41,6 +41,10 @@ pub struct Args {
     pub bays_x: u32,
     #[arg(long, default_value_t = 2)]
     pub bays_y: u32,
+    /// Frame of survey 2's COLMAP model: `same` (survey 1's world frame) or `joint` (one model
+    /// of the old and new images in a random similarity frame, as a user's COLMAP run gives).
+    #[arg(long, default_value_t = Survey2Frame::Same)]
+    pub survey2_frame: Survey2Frame,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -56,6 +60,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         floors: args.floors,
         bays_x: args.bays_x,
         bays_y: args.bays_y,
+        survey2_frame: args.survey2_frame,
         ..SynthParams::demo(&args.out)
     };
     let start = Instant::now();
@@ -78,6 +83,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     })?;
     bar.finish_and_clear();
     for s in &output.surveys {
+        let q = &s.quantities;
         let classes: Vec<String> = DamageClass::ALL
             .iter()
             .map(|c| format!("{} in {}", c.id(), s.views_with_class[c.channel()]))
@@ -93,6 +99,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             } else {
                 String::new()
             }
+        );
+        println!(
+            "  true damage: cracks {:.2} m ({}), spalling {:.3} m² ({}), exposed rebar {:.2} m ({}); \
+             {} regions new",
+            q.crack_length_m,
+            q.cracks,
+            q.spalling_area_m2,
+            q.spalls,
+            q.rebar_length_m,
+            q.rebar,
+            q.new_regions
         );
     }
     println!("done in {:.1} s", start.elapsed().as_secs_f64());

@@ -11,6 +11,9 @@ pub struct Crack {
     pub widths: Vec<f32>,
     /// 0 for a main crack, 1.. for branches.
     pub generation: u32,
+    /// The damage region (`truth/quantities.json` id) the crack belongs to: a main crack, its
+    /// branches and its later extensions share one.
+    pub region: u32,
 }
 
 /// Parameters of one grown crack.
@@ -21,6 +24,8 @@ pub struct CrackSeed {
     pub angle: f32,
     pub length: f32,
     pub width: f32,
+    /// Region id given to the crack and its branches.
+    pub region: u32,
 }
 
 const STEP: f32 = 0.035;
@@ -59,6 +64,7 @@ pub fn grow(
                 angle: theta + side * (0.35 + 0.5 * rng.f32()),
                 length: (steps - i) as f32 * STEP * (0.3 + 0.4 * rng.f32()),
                 width: w * 0.6,
+                region: seed.region,
             });
         }
     }
@@ -67,6 +73,7 @@ pub fn grow(
             points,
             widths,
             generation,
+            region: seed.region,
         });
     }
     for b in branches {
@@ -212,6 +219,7 @@ mod tests {
             angle: 0.8,
             length: 1.5,
             width: 0.04,
+            region: 0,
         };
         grow(&mut rng, seed, bounds, 0, &mut out);
         assert!(!out.is_empty());
@@ -231,6 +239,7 @@ mod tests {
             points: vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 1.0)],
             widths: vec![0.03, 0.03],
             generation: 0,
+            region: 0,
         };
         let field = CrackField::new(&[crack], (0.0, 2.0), (0.0, 2.0));
         assert!(field.query(Vec2::new(0.5, 0.5), 0.01).in_mask);

@@ -13,6 +13,8 @@ use crate::scene::DamageClass;
 /// Bars exposed in the core of a spall.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Rebar {
+    /// Region id of the exposed bars (`truth/quantities.json`), their own beside the spall's.
+    pub id: u32,
     /// Main bars run vertically (columns) or horizontally (beams).
     pub vertical: bool,
     /// Main bar centre lines across their direction (u for vertical bars, v for horizontal).
@@ -23,6 +25,8 @@ pub struct Rebar {
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Spall {
+    /// Region id (`truth/quantities.json`), kept when the spall grows.
+    pub id: u32,
     pub facade: usize,
     pub centre: Vec2,
     pub radius: f32,
@@ -30,19 +34,35 @@ pub struct Spall {
     pub rebar: Option<Rebar>,
 }
 
-const BAR_HALF: f32 = 0.014;
+/// Half the diameter of a main bar (28 mm bars); ties are 0.7 of it.
+pub const BAR_HALF: f32 = 0.014;
 /// Rebar shows where the spall is deeper than this fraction of its radius.
-const REBAR_CORE: f32 = 0.72;
+pub const REBAR_CORE: f32 = 0.72;
+/// The largest boundary radius as a multiple of `Spall::radius` (0.7 + 0.45 + 0.2).
+pub const BOUNDARY_MAX: f32 = 1.35;
 /// Facade faces within this distance of the outer column plane carry the facade's damage.
 const FACADE_DEPTH: f32 = 0.4;
 
 impl Spall {
     /// The irregular boundary radius in direction `dir` (unit vector from the centre).
-    fn boundary(&self, dir: Vec2) -> f32 {
+    pub fn boundary(&self, dir: Vec2) -> f32 {
         // Noise on a circle: the outline is periodic in angle and keeps its shape when grown.
         let n1 = value_noise(self.seed, 1.6 * dir.x + 20.0, 1.6 * dir.y + 20.0);
         let n2 = value_noise(self.seed ^ 0x55, 4.0 * dir.x + 40.0, 4.0 * dir.y + 40.0);
         self.radius * (0.7 + 0.45 * n1 + 0.2 * n2)
+    }
+
+    /// Whether facade point `p` lies inside the outline scaled by `fraction` (1: the spall,
+    /// `REBAR_CORE`: its core). The same test as `DamageState::eval`'s, so what is measured
+    /// against it partitions what `eval` classes.
+    pub fn contains(&self, p: Vec2, fraction: f32) -> bool {
+        let d = p - self.centre;
+        let dist = d.length();
+        if !(dist < BOUNDARY_MAX * fraction * self.radius) {
+            return false;
+        }
+        let dir = if dist > 1e-6 { d / dist } else { Vec2::X };
+        dist < fraction * self.boundary(dir)
     }
 }
 
@@ -186,17 +206,41 @@ pub fn surface_point(
     (f == facade).then_some(pos)
 }
 
+/// The surface that carries facade `facade`'s damage at `(u, v)`, with its component: the first
+/// face met along the inward normal from 5 cm outside the facade's outer plane (the column faces;
+/// slab edges stand 2 cm proud of it), if it carries the facade's damage. Unlike `surface_point`
+/// it starts inside things standing in front of the facade (balcony parapet, rubble): they hide
+/// damage from some views, but the damage is on the structure all the same.
+pub fn damage_surface(
+    building: &Building,
+    geometry: &Geometry,
+    facade: usize,
+    p: Vec2,
+) -> Option<(Vec3, Component)> {
+    let fa: &Facade = &building.facades[facade];
+    let n = fa.normal();
+    let ray = Ray::new(fa.point(p.x, p.y, fa.offset) + n * 0.05, -n);
+    let hit = geometry.intersect(&ray, FACADE_DEPTH + 0.05)?;
+    let prim = geometry.prims.get(hit.prim as usize)?;
+    let pos = ray.at(hit.t);
+    let (f, _) = damage_facade(building, prim, hit.face, pos)?;
+    (f == facade).then_some((pos, prim.component))
+}
+
 /// How strongly each facade is damaged (front, right, back, left).
 const SEVERITY: [f32; 4] = [1.0, 0.35, 0.3, 0.7];
 
 /// Survey 1's damage and survey 2's (survey 1 plus new cracks and grown spalls).
 pub fn generate(building: &Building, seed: u64) -> (DamageState, DamageState) {
     let mut rng = fastrand::Rng::with_seed(seed ^ 0xDA3A_6E00);
+    // Region ids in order of creation; survey 2's new damage takes ids after all of survey 1's,
+    // so an id names the same crack or spall in both surveys. Ids draw nothing from `rng`.
+    let mut ids = RegionIds::default();
     let mut cracks: [Vec<Crack>; 4] = Default::default();
     let mut spalls = Vec::new();
     for f in 0..4 {
-        add_cracks(building, f, SEVERITY[f], &mut rng, &mut cracks[f]);
-        add_spalls(building, f, SEVERITY[f], &mut rng, &mut spalls);
+        add_cracks(building, f, SEVERITY[f], &mut rng, &mut ids, &mut cracks[f]);
+        add_spalls(building, f, SEVERITY[f], &mut rng, &mut ids, &mut spalls);
     }
     let survey1 = DamageState::new(cracks.clone(), spalls.clone(), building);
 
@@ -209,7 +253,7 @@ pub fn generate(building: &Building, seed: u64) -> (DamageState, DamageState) {
         if active(sp.facade) && rng.f32() < 0.7 {
             sp.radius *= 1.25 + 0.25 * rng.f32();
             if sp.rebar.is_none() {
-                sp.rebar = rebar_for(building, sp.facade, sp.centre, sp.radius);
+                sp.rebar = rebar_for(building, sp.facade, sp.centre, sp.radius, &mut ids);
             }
         }
     }
@@ -225,20 +269,42 @@ pub fn generate(building: &Building, seed: u64) -> (DamageState, DamageState) {
                     angle: dir.y.atan2(dir.x),
                     length: 0.4 + 0.6 * rng.f32(),
                     width: c.widths[n - 1].max(0.012),
+                    // Growth of an old crack, not new damage: it keeps the crack's region.
+                    region: c.region,
                 };
                 grow(&mut rng, seed, bounds, 1, &mut extended);
             }
         }
         cracks[f].extend(extended);
         let mut fresh = Vec::new();
-        add_cracks(building, f, 0.6 * SEVERITY[f], &mut rng, &mut fresh);
+        add_cracks(
+            building,
+            f,
+            0.6 * SEVERITY[f],
+            &mut rng,
+            &mut ids,
+            &mut fresh,
+        );
         cracks[f].extend(fresh);
         if rng.f32() < SEVERITY[f] {
-            add_spalls(building, f, 0.35, &mut rng, &mut spalls);
+            add_spalls(building, f, 0.35, &mut rng, &mut ids, &mut spalls);
         }
     }
     let survey2 = DamageState::new(cracks, spalls, building);
     (survey1, survey2)
+}
+
+/// Hands out region ids in order.
+#[derive(Default)]
+struct RegionIds {
+    next: u32,
+}
+
+impl RegionIds {
+    fn take(&mut self) -> u32 {
+        self.next += 1;
+        self.next - 1
+    }
 }
 
 fn facade_bounds(f: &Facade) -> (Vec2, Vec2) {
@@ -257,6 +323,7 @@ fn add_cracks(
     f: usize,
     severity: f32,
     rng: &mut fastrand::Rng,
+    ids: &mut RegionIds,
     out: &mut Vec<Crack>,
 ) {
     let fa = &building.facades[f];
@@ -284,6 +351,7 @@ fn add_cracks(
                 angle: angle + (rng.f32() - 0.5) * 0.4,
                 length: 1.0 + 1.2 * rng.f32(),
                 width: crack_width(rng),
+                region: ids.take(),
             };
             grow(rng, cs, bounds, 0, out);
         }
@@ -296,6 +364,8 @@ fn add_cracks(
         let v = floor * storey + 0.8 + rng.f32() * (storey - 1.6);
         let centre = Vec2::new(u, v);
         let width = crack_width(rng);
+        // The four arms of an X are one region: they meet, and a mask shows one crack.
+        let region = ids.take();
         for k in 0..4 {
             let angle = 0.78 + k as f32 * std::f32::consts::FRAC_PI_2 + (rng.f32() - 0.5) * 0.3;
             let cs = CrackSeed {
@@ -303,6 +373,7 @@ fn add_cracks(
                 angle,
                 length: 0.6 + 0.8 * rng.f32(),
                 width,
+                region,
             };
             grow(rng, cs, bounds, 0, out);
         }
@@ -341,13 +412,20 @@ fn add_cracks(
                 angle: angle + (rng.f32() - 0.5) * 0.15,
                 length,
                 width: 0.015 + 0.015 * rng.f32(),
+                region: ids.take(),
             };
             grow(rng, cs, bounds, 1, out);
         }
     }
 }
 
-fn rebar_for(building: &Building, facade: usize, centre: Vec2, radius: f32) -> Option<Rebar> {
+fn rebar_for(
+    building: &Building,
+    facade: usize,
+    centre: Vec2,
+    radius: f32,
+    ids: &mut RegionIds,
+) -> Option<Rebar> {
     if !(radius > 0.26) {
         return None;
     }
@@ -362,6 +440,7 @@ fn rebar_for(building: &Building, facade: usize, centre: Vec2, radius: f32) -> O
     let in_beam = centre.y > floor_top - BEAM_DEPTH && (col - centre.x).abs() > COLUMN_HALF;
     if (col - centre.x).abs() < COLUMN_HALF + 0.1 {
         Some(Rebar {
+            id: ids.take(),
             vertical: true,
             bars: vec![col - 0.13, col, col + 0.13],
             tie_spacing: 0.2,
@@ -369,6 +448,7 @@ fn rebar_for(building: &Building, facade: usize, centre: Vec2, radius: f32) -> O
     } else if in_beam {
         let mid = floor_top - 0.5 * (BEAM_DEPTH + SLAB_DEPTH);
         Some(Rebar {
+            id: ids.take(),
             vertical: false,
             bars: vec![mid - 0.14, mid + 0.14],
             tie_spacing: 0.2,
@@ -383,6 +463,7 @@ fn add_spalls(
     f: usize,
     severity: f32,
     rng: &mut fastrand::Rng,
+    ids: &mut RegionIds,
     out: &mut Vec<Spall>,
 ) {
     let storey = building.spec.storey;
@@ -409,12 +490,14 @@ fn add_spalls(
         } else {
             continue;
         };
+        let id = ids.take();
         out.push(Spall {
+            id,
             facade: f,
             centre,
             radius,
             seed: rng.u32(..),
-            rebar: rebar_for(building, f, centre, radius),
+            rebar: rebar_for(building, f, centre, radius, ids),
         });
     }
     // Plaster or cover spalls on wall panels.
@@ -426,6 +509,7 @@ fn add_spalls(
             0.6 + rng.f32() * (storey * 2.0 - 1.2).min(fa.v_range.1 - 1.2),
         );
         out.push(Spall {
+            id: ids.take(),
             facade: f,
             centre,
             radius: 0.2 + 0.25 * rng.f32(),

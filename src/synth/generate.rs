@@ -13,9 +13,11 @@ use super::corrupt;
 use super::damage::{self, DamagePoint, DamageState};
 use super::drone;
 use super::geometry::{Component, Geometry};
+use super::joint::{self, JointFrame, Similarity, new_view_name};
 use super::lighting::{AoMaps, Lighting};
 use super::noise::{hash3, seed32};
-use super::params::{SurveyOutput, SynthError, SynthOutput, SynthParams};
+use super::params::{Survey2Frame, SurveyOutput, SynthError, SynthOutput, SynthParams};
+use super::quantities;
 use super::render::{SceneContext, ViewRender, render_view};
 use super::write;
 use crate::scene::Camera;
@@ -96,8 +98,11 @@ pub fn generate(
     progress(0, total);
     let tick = || progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
     let mut surveys = Vec::new();
+    let mut survey1_model = None;
     for survey in 1..=params.surveys {
-        surveys.push(write_survey(params, &world, survey, &tick)?);
+        let (output, model) = write_survey(params, &world, survey, &tick, survey1_model.as_ref())?;
+        surveys.push(output);
+        survey1_model.get_or_insert(model);
     }
     Ok(SynthOutput { surveys })
 }
@@ -107,14 +112,25 @@ struct ViewResult {
     has_class: [bool; 3],
 }
 
+/// Writes survey `survey`; returns what it wrote and its COLMAP model in the world frame (the
+/// joint survey 2 is built from survey 1's).
 fn write_survey(
     params: &SynthParams,
     world: &World,
     survey: u32,
     tick: &(dyn Fn() + Sync),
-) -> Result<SurveyOutput, SynthError> {
+    survey1_model: Option<&ColmapModel>,
+) -> Result<(SurveyOutput, ColmapModel), SynthError> {
     let dir = params.out.join(format!("survey-{survey}"));
     let second = survey >= 2;
+    let joint = second && params.survey2_frame == Survey2Frame::Joint;
+    let name = |i: usize| {
+        if joint {
+            new_view_name(i)
+        } else {
+            view_name(i)
+        }
+    };
     let mut dirs = vec![
         dir.join("images"),
         dir.join("truth/components"),
@@ -156,6 +172,7 @@ fn write_survey(
             let res = write_view(
                 &dir,
                 i,
+                &name(i),
                 cam,
                 &r,
                 noisy[i],
@@ -177,7 +194,7 @@ fn write_survey(
     };
     let mut rng = fastrand::Rng::with_seed(params.seed ^ (0x5F00 + survey as u64));
     for (i, (cam, res)) in cameras.iter().zip(&results).enumerate() {
-        let mut image = ColmapImage::from_camera(i as u32 + 1, 1, view_name(i), cam);
+        let mut image = ColmapImage::from_camera(i as u32 + 1, 1, name(i), cam);
         for (j, (p, rgb, px)) in res.points.iter().enumerate() {
             let id = model.points.len() as u64 + 1;
             image.points2d.push((*px, id as i64));
@@ -191,15 +208,49 @@ fn write_survey(
         }
         model.images.push(image);
     }
-    write_text(&dir.join("sparse/0"), &model)?;
+    let mut old_images = Vec::new();
+    let mut old_corrupted = Vec::new();
+    if joint {
+        let old = survey1_model.ok_or_else(|| {
+            SynthError::InvalidParams("the joint survey 2 needs survey 1's model".to_string())
+        })?;
+        old_images = old.images.iter().map(|im| im.name.clone()).collect();
+        let classes: Vec<&str> = DamageClass::ALL.iter().map(|c| c.id()).collect();
+        joint::copy_old_views(&params.out.join("survey-1"), &dir, &old_images, &classes)?;
+        let sim = Similarity::random(params.seed);
+        write_text(
+            &dir.join("sparse/0"),
+            &joint::joint_model(old, &model, &sim, params.seed),
+        )?;
+        let new_images = (0..cameras.len()).map(name).collect();
+        JointFrame::new(&sim, params.seed, old_images.clone(), new_images)
+            .write(&dir.join("truth/joint_frame.json"))?;
+        // Survey 1's written masks are copied, corrupted ones included.
+        let noisy1 = corrupt::noisy_views(old_images.len(), params.mask_noise, params.seed ^ 1);
+        old_corrupted = (0..old_images.len())
+            .filter(|&i| noisy1[i])
+            .map(view_name)
+            .collect();
+    } else {
+        write_text(&dir.join("sparse/0"), &model)?;
+    }
 
     let state = ctx.damage;
+    let measured = quantities::measure(
+        &world.building,
+        &world.geometry,
+        state,
+        ctx.previous,
+        survey,
+    );
+    quantities::write(&dir.join("truth/quantities.json"), &measured)?;
     let manifest = write::Manifest {
         generator: format!("damage-twin synth {}", env!("CARGO_PKG_VERSION")),
         survey,
         params: params.clone(),
         lighting: lighting.clone(),
-        images: (0..cameras.len()).map(view_name).collect(),
+        images: (0..cameras.len()).map(name).collect(),
+        old_images,
         components: Component::ALL.iter().map(|c| (c.id(), c.name().to_string())).collect(),
         depth: write::DEPTH_ENCODING.to_string(),
         masks: "masks/<class>/<stem>.png and truth/masks/<class>/<stem>.png: 0/255 grey PNG of the \
@@ -207,7 +258,10 @@ fn write_survey(
             half a pixel); classes are exclusive (rebar, then spalling, then crack). truth/components: \
             8-bit ids listed in `components`. truth/new-damage (survey 2): damage absent in survey 1."
             .to_string(),
-        mask_corrupted_images: (0..cameras.len()).filter(|&i| noisy[i]).map(view_name).collect(),
+        mask_corrupted_images: old_corrupted
+            .into_iter()
+            .chain((0..cameras.len()).filter(|&i| noisy[i]).map(name))
+            .collect(),
         damage: write::DamageSummary {
             cracks: state.cracks.iter().map(|c| c.len()).sum(),
             spalls: state.spalls.len(),
@@ -216,6 +270,12 @@ fn write_survey(
         world: "z up, metres; ground plane z = 0; building frame from (0, 0) to (bays_x * 4, bays_y * 4.5); \
             cameras in COLMAP convention (world-to-camera, x right, y down, z forward)"
             .to_string(),
+        frame: if joint {
+            write::JOINT_FRAME.to_string()
+        } else {
+            "sparse/0 is in the world frame (metres), as truth/ is".to_string()
+        },
+        quantities: quantities::SCHEMA.to_string(),
     };
     write::manifest(&dir.join("truth/manifest.ron"), &manifest)?;
 
@@ -225,19 +285,25 @@ fn write_survey(
             *count += has as usize;
         }
     }
-    Ok(SurveyOutput {
+    let output = SurveyOutput {
         dir,
         views: cameras.len(),
-        points: model.points.len(),
+        points: model.points.len()
+            + survey1_model
+                .filter(|_| joint)
+                .map_or(0, |m| m.points.len()),
         views_with_class,
         corrupted_views: noisy.iter().filter(|&&b| b).count(),
-    })
+        quantities: measured.totals,
+    };
+    Ok((output, model))
 }
 
 #[allow(clippy::too_many_arguments)]
 fn write_view(
     dir: &Path,
     index: usize,
+    name: &str,
     camera: &Camera,
     r: &ViewRender,
     noisy: bool,
@@ -246,12 +312,11 @@ fn write_view(
     seed: u64,
     survey: u32,
 ) -> Result<ViewResult, SynthError> {
-    let name = view_name(index);
     let (w, h) = (r.width, r.height);
     let mut rng = fastrand::Rng::with_seed(seed ^ hash3(0x51, survey, index as u32, 7) as u64);
     let mut noise_rng =
         fastrand::Rng::with_seed(seed ^ hash3(0x52, survey, index as u32, 9) as u64);
-    write::rgb_png(&dir.join("images").join(&name), w, h, r.rgb.clone())?;
+    write::rgb_png(&dir.join("images").join(name), w, h, r.rgb.clone())?;
     let building: Vec<bool> = r
         .components
         .iter()
@@ -263,7 +328,7 @@ fn write_view(
         let clean: Vec<u8> = r.classes.iter().map(|&c| (c & bit != 0) as u8).collect();
         has_class[class.channel()] = clean.contains(&1);
         write::mask_png(
-            &dir.join("truth/masks").join(class.id()).join(&name),
+            &dir.join("truth/masks").join(class.id()).join(name),
             w,
             h,
             &clean,
@@ -283,7 +348,7 @@ fn write_view(
             clean
         };
         write::mask_png(
-            &dir.join("masks").join(class.id()).join(&name),
+            &dir.join("masks").join(class.id()).join(name),
             w,
             h,
             &written,
@@ -295,7 +360,7 @@ fn write_view(
                 .map(|&c| (c & bit != 0) as u8)
                 .collect();
             write::mask_png(
-                &dir.join("truth/new-damage").join(class.id()).join(&name),
+                &dir.join("truth/new-damage").join(class.id()).join(name),
                 w,
                 h,
                 &new,
@@ -303,13 +368,13 @@ fn write_view(
         }
     }
     write::grey_png(
-        &dir.join("truth/components").join(&name),
+        &dir.join("truth/components").join(name),
         w,
         h,
         r.components.clone(),
     )?;
     let depth_mm = r.depth.iter().map(|&z| write::depth_to_mm(z)).collect();
-    write::depth_png(&dir.join("truth/depth").join(&name), w, h, depth_mm)?;
+    write::depth_png(&dir.join("truth/depth").join(name), w, h, depth_mm)?;
 
     // SfM-like sparse points: random surface pixels, unprojected, with ~1 cm positional noise.
     let k = camera.intrinsics;

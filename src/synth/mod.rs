@@ -2,6 +2,7 @@
 //! drone at two survey dates, written as COLMAP datasets with exact masks, depth and labels.
 //! Must not depend on the trainer; same seed, same bytes.
 
+pub mod area;
 pub mod building;
 pub mod corrupt;
 pub mod cracks;
@@ -10,12 +11,14 @@ pub mod demo;
 pub mod drone;
 pub mod generate;
 pub mod geometry;
+pub mod joint;
 pub mod lighting;
 pub mod materials;
 pub mod noise;
 pub mod params;
+pub mod quantities;
 pub mod render;
 pub mod write;
 
 pub use generate::{World, generate, view_name};
-pub use params::{SurveyOutput, SynthError, SynthOutput, SynthParams};
+pub use params::{Survey2Frame, SurveyOutput, SynthError, SynthOutput, SynthParams};

@@ -30,6 +30,48 @@ pub struct SynthParams {
     /// Sparse SfM-like points per survey.
     pub sparse_points: usize,
     pub hfov_degrees: f32,
+    /// Which frame survey 2's COLMAP model is in.
+    #[serde(default)]
+    pub survey2_frame: Survey2Frame,
+}
+
+/// The frame of survey 2's COLMAP model.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Survey2Frame {
+    /// Survey 1's world frame; survey 2's images only.
+    #[default]
+    Same,
+    /// As a user's COLMAP run over old and new images would give: one model of survey 1's
+    /// images and survey 2's (`new-view-NNN.png`) in a random similarity frame with pose noise.
+    Joint,
+}
+
+impl Survey2Frame {
+    pub const ALL: [Survey2Frame; 2] = [Survey2Frame::Same, Survey2Frame::Joint];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Survey2Frame::Same => "same",
+            Survey2Frame::Joint => "joint",
+        }
+    }
+}
+
+impl std::fmt::Display for Survey2Frame {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Survey2Frame {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        Survey2Frame::ALL
+            .into_iter()
+            .find(|m| m.name() == text)
+            .ok_or_else(|| format!("unknown survey-2 frame {text:?}: use same or joint"))
+    }
 }
 
 impl SynthParams {
@@ -50,6 +92,7 @@ impl SynthParams {
             bays_y: 2,
             sparse_points: 30_000,
             hfov_degrees: 65.0,
+            survey2_frame: Survey2Frame::Same,
         }
     }
 
@@ -76,6 +119,9 @@ impl SynthParams {
         if !(self.hfov_degrees > 10.0 && self.hfov_degrees < 150.0) {
             return bad("the field of view must be between 10 and 150 degrees");
         }
+        if self.survey2_frame == Survey2Frame::Joint && self.surveys < 2 {
+            return bad("--survey2-frame joint needs --surveys 2");
+        }
         Ok(())
     }
 }
@@ -90,6 +136,8 @@ pub struct SurveyOutput {
     pub views_with_class: [usize; 3],
     /// Views whose written masks were corrupted.
     pub corrupted_views: usize,
+    /// The survey's true damage totals (`truth/quantities.json`).
+    pub quantities: crate::synth::quantities::Totals,
 }
 
 #[derive(Clone, Debug, PartialEq)]

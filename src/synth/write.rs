@@ -86,6 +86,14 @@ pub fn depth_to_mm(z: f32) -> u16 {
 pub const DEPTH_ENCODING: &str = "truth/depth/<stem>.png: 16-bit grey PNG, camera-space z (along the \
     optical axis, COLMAP convention) in millimetres; 0 = sky (no surface), 65535 = 65.535 m or farther";
 
+pub const JOINT_FRAME: &str = "joint: sparse/0 holds survey 1's images (`old_images`, survey-1 \
+    names) and this survey's (`images`, named new-view-NNN.png) in one random similarity frame with \
+    pose noise, as a user's COLMAP run over old and new images would; truth/joint_frame.json gives \
+    the similarity (twin = survey 1 world frame -> joint frame) and the noise. images/ and \
+    masks/<class>/ hold both surveys' files (survey 1's copied byte for byte); truth/ describes \
+    the new images only. truth/depth and truth/quantities.json stay in metres of the world frame \
+    (multiply depth by the similarity's scale for joint units)";
+
 /// `truth/manifest.ron`: everything needed to regenerate and interpret a survey.
 #[derive(Serialize)]
 pub struct Manifest {
@@ -93,13 +101,20 @@ pub struct Manifest {
     pub survey: u32,
     pub params: SynthParams,
     pub lighting: Lighting,
+    /// This survey's own images (survey 2's are `new-view-NNN.png` in the joint frame).
     pub images: Vec<String>,
+    /// Survey 1's images, also in this survey's model (joint frame only; empty otherwise).
+    pub old_images: Vec<String>,
     pub components: Vec<(u8, String)>,
     pub depth: String,
     pub masks: String,
     pub mask_corrupted_images: Vec<String>,
     pub damage: DamageSummary,
     pub world: String,
+    /// Which frame sparse/0 is in.
+    pub frame: String,
+    /// The schema of truth/quantities.json.
+    pub quantities: String,
 }
 
 #[derive(Serialize)]
