@@ -6,20 +6,32 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use crate::damage::DamageClass;
+use crate::scene::atomic::write_atomic;
+use crate::scene::limits::{MAX_IMAGE_SIDE, check_image_size};
 use crate::scene::masks::{read_view_masks, resize_mask};
 use crate::scene::undistort::{undistort_mask, undistort_rgb};
 use crate::scene::{
     Camera, Dataset, Distortion, ImageScale, LoadedView, Mask, RgbImage, SceneError, View,
 };
 
-fn decode(path: &Path) -> Result<image::DynamicImage, SceneError> {
-    let reader = image::ImageReader::open(path)
-        .map_err(|e| SceneError::io(path, e))?
+/// Decodes an image or mask file: a regular file only, its header's size within
+/// `limits::check_image_size` before any pixel buffer is allocated, and the decoder's own
+/// allocation limit (the `image` crate's default, 512 MiB) kept.
+pub(crate) fn decode(path: &Path) -> Result<image::DynamicImage, SceneError> {
+    let file = crate::scene::files::open_regular(path)?;
+    let mut reader = image::ImageReader::new(std::io::BufReader::new(file))
         .with_guessed_format()
         .map_err(|e| SceneError::io(path, e))?;
-    reader
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_IMAGE_SIDE);
+    limits.max_image_height = Some(MAX_IMAGE_SIDE);
+    reader.limits(limits);
+    let img = reader
         .decode()
-        .map_err(|e| SceneError::invalid(path, format!("cannot decode image: {e}")))
+        .map_err(|e| SceneError::invalid(path, format!("cannot decode image: {e}")))?;
+    check_image_size(u64::from(img.width()), u64::from(img.height()))
+        .map_err(|m| SceneError::invalid(path, m))?;
+    Ok(img)
 }
 
 /// Loads an image as RGB in `[0, 1]`; an alpha channel is composited on `background`
@@ -56,7 +68,26 @@ pub fn load_image(path: &Path) -> Result<RgbImage, SceneError> {
     load_image_with_background(path, [0.0; 3])
 }
 
-/// Saves an image as 8-bit RGB PNG (values clamped to `[0, 1]`).
+/// Encodes `image` as PNG in memory and writes it atomically (`atomic::write_atomic`), so a
+/// failed save never leaves half a file under `path`.
+fn write_png_atomic<P>(
+    path: &Path,
+    image: &image::ImageBuffer<P, Vec<u8>>,
+) -> Result<(), SceneError>
+where
+    P: image::PixelWithColorType<Subpixel = u8>,
+{
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    image
+        .write_to(&mut bytes, image::ImageFormat::Png)
+        .map_err(|e| SceneError::invalid(path, format!("cannot write PNG: {e}")))?;
+    write_atomic(path, |w| {
+        use std::io::Write;
+        w.write_all(bytes.get_ref())
+    })
+}
+
+/// Saves an image as 8-bit RGB PNG (values clamped to `[0, 1]`), atomically.
 pub fn save_png(path: &Path, image: &RgbImage) -> Result<(), SceneError> {
     if image.data.len() != image.pixel_count() * 3 {
         return Err(SceneError::invalid(
@@ -69,13 +100,11 @@ pub fn save_png(path: &Path, image: &RgbImage) -> Result<(), SceneError> {
             ),
         ));
     }
-    image
-        .to_rgb8()
-        .save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| SceneError::invalid(path, format!("cannot write PNG: {e}")))
+    write_png_atomic(path, &image.to_rgb8())
 }
 
-/// Saves a mask as an 8-bit grey PNG, 255 where set (the per-class mask format it reads back).
+/// Saves a mask as an 8-bit grey PNG, 255 where set (the per-class mask format it reads back),
+/// atomically.
 pub fn save_mask_png(path: &Path, mask: &Mask) -> Result<(), SceneError> {
     let bytes = mask
         .data
@@ -93,8 +122,7 @@ pub fn save_mask_png(path: &Path, mask: &Mask) -> Result<(), SceneError> {
             ),
         )
     })?;
-    img.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| SceneError::invalid(path, format!("cannot write PNG: {e}")))
+    write_png_atomic(path, &img)
 }
 
 /// Resizes an image. An exact integer downscale (both axes by the same `f`) averages each
@@ -197,7 +225,7 @@ impl Dataset {
         if let Some(d) = &distortion {
             image = undistort_rgb(&image, d, &camera.intrinsics);
         }
-        let (width, height) = scale.apply(stored.0, stored.1);
+        let (width, height) = loaded_size(view, scale, stored)?;
         let masks = match &self.masks_dir {
             Some(dir) => read_masks_at(
                 dir,
@@ -228,11 +256,9 @@ impl Dataset {
         scale: ImageScale,
     ) -> Result<(Camera, BTreeMap<DamageClass, Mask>), SceneError> {
         let view = self.view(index)?;
-        let path = &view.image_path;
-        let stored = image::image_dimensions(path)
-            .map_err(|e| SceneError::invalid(path, format!("cannot read the image size: {e}")))?;
+        let stored = crate::scene::files::image_size(&view.image_path)?;
         let (camera, distortion) = stored_geometry(view, stored)?;
-        let (width, height) = scale.apply(stored.0, stored.1);
+        let (width, height) = loaded_size(view, scale, stored)?;
         let masks = read_masks_at(
             masks_dir,
             view,
@@ -254,10 +280,22 @@ impl Dataset {
     }
 }
 
+/// The size view's image is loaded at: `scale` applied to the stored size, refused (naming the
+/// image) when it would upscale the image or exceed the size limits.
+fn loaded_size(
+    view: &View,
+    scale: ImageScale,
+    stored: (u32, u32),
+) -> Result<(u32, u32), SceneError> {
+    scale
+        .checked_apply(stored.0, stored.1)
+        .map_err(|m| SceneError::invalid(&view.image_path, m))
+}
+
 /// The view's camera and distortion for its image as stored (`stored` = width, height): as given
 /// when the sizes agree, scaled for a copy pre-downscaled by 2, 4 or 8, else an error naming the
 /// image.
-fn stored_geometry(
+pub(crate) fn stored_geometry(
     view: &View,
     stored: (u32, u32),
 ) -> Result<(Camera, Option<Distortion>), SceneError> {
