@@ -26,12 +26,13 @@ pub(crate) fn decode(path: &Path) -> Result<image::DynamicImage, SceneError> {
     limits.max_image_width = Some(MAX_IMAGE_SIDE);
     limits.max_image_height = Some(MAX_IMAGE_SIDE);
     reader.limits(limits);
-    let img = reader
-        .decode()
-        .map_err(|e| SceneError::invalid(path, format!("cannot decode image: {e}")))?;
-    check_image_size(u64::from(img.width()), u64::from(img.height()))
+    let cannot =
+        |e: image::ImageError| SceneError::invalid(path, format!("cannot decode image: {e}"));
+    let decoder = reader.into_decoder().map_err(cannot)?;
+    let (width, height) = image::ImageDecoder::dimensions(&decoder);
+    check_image_size(u64::from(width), u64::from(height))
         .map_err(|m| SceneError::invalid(path, m))?;
-    Ok(img)
+    image::DynamicImage::from_decoder(decoder).map_err(cannot)
 }
 
 /// Loads an image as RGB in `[0, 1]`; an alpha channel is composited on `background`
@@ -280,7 +281,7 @@ impl Dataset {
     }
 }
 
-/// The size view's image is loaded at: `scale` applied to the stored size, refused (naming the
+/// The size a view's image is loaded at: `scale` applied to the stored size, refused (naming the
 /// image) when it would upscale the image or exceed the size limits.
 fn loaded_size(
     view: &View,
@@ -366,6 +367,29 @@ mod tests {
         assert_eq!(downscale_factor((1297, 840), (649, 420)), Some(2));
         assert_eq!(downscale_factor((1297, 840), (162, 105)), Some(8));
         assert_eq!(downscale_factor((1297, 840), (600, 420)), None);
+    }
+
+    #[test]
+    fn a_header_claiming_too_many_pixels_is_refused_before_decoding() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("lie.png");
+        image::RgbImage::new(1, 1).save(&path).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        // IHDR: 20000 × 20000 (each side allowed, 4·10^8 pixels not), checksum fixed so the
+        // decoder believes it.
+        bytes[16..20].copy_from_slice(&20_000u32.to_be_bytes());
+        bytes[20..24].copy_from_slice(&20_000u32.to_be_bytes());
+        let crc = bytes[12..29].iter().fold(!0u32, |mut crc, &b| {
+            crc ^= u32::from(b);
+            for _ in 0..8 {
+                crc = (crc >> 1) ^ (0xEDB8_8320 & 0u32.wrapping_sub(crc & 1));
+            }
+            crc
+        });
+        bytes[29..33].copy_from_slice(&(!crc).to_be_bytes());
+        std::fs::write(&path, bytes).unwrap();
+        let err = load_image(&path).unwrap_err().to_string();
+        assert!(err.contains("lie.png") && err.contains("400000000 pixels"), "{err}");
     }
 
     #[test]

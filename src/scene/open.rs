@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 
 use crate::scene::colmap::{self, ColmapModel, ColmapPoint};
 use crate::scene::files::{EntryBudget, image_size, list_dir, walk_files};
-use crate::scene::limits::{MAX_LISTED_ENTRIES, MAX_POINT_COORDINATE, MAX_VIEWS};
+use crate::scene::limits::{
+    MAX_LISTED_ENTRIES, MAX_POINT_COORDINATE, MAX_VIEWS, check_image_size, is_usable_position,
+};
 use crate::scene::{
     Camera, Dataset, DatasetFormat, Distortion, Intrinsics, PointCloud, SceneError, Split, View,
 };
@@ -87,7 +89,7 @@ pub(crate) fn check_views_against_images(views: &[View]) -> Result<(), SceneErro
             Some(&size) => size,
             None => {
                 let size = image_size(path)?;
-                crate::scene::limits::check_image_size(u64::from(size.0), u64::from(size.1))
+                check_image_size(u64::from(size.0), u64::from(size.1))
                     .map_err(|m| SceneError::invalid(path, m))?;
                 sizes.insert(path, size);
                 size
@@ -335,7 +337,7 @@ fn usable_points(points: &[ColmapPoint]) -> (Option<PointCloud>, Vec<u64>) {
     let mut cloud = PointCloud::default();
     let mut skipped = Vec::new();
     for p in points {
-        if crate::scene::limits::is_usable_position(p.xyz) {
+        if is_usable_position(p.xyz) {
             cloud
                 .positions
                 .push(glam::DVec3::from_array(p.xyz).as_vec3());
