@@ -389,7 +389,10 @@ mod tests {
         bytes[29..33].copy_from_slice(&(!crc).to_be_bytes());
         std::fs::write(&path, bytes).unwrap();
         let err = load_image(&path).unwrap_err().to_string();
-        assert!(err.contains("lie.png") && err.contains("400000000 pixels"), "{err}");
+        assert!(
+            err.contains("lie.png") && err.contains("400000000 pixels"),
+            "{err}"
+        );
     }
 
     #[test]
