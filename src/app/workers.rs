@@ -146,8 +146,11 @@ pub fn load_photo(dataset: Arc<Dataset>, index: usize, results: Sender<WorkerRes
         } else {
             ImageScale::Factor(1)
         };
+        // A pre-downscaled copy may be stored narrower than the photo cap: as stored then
+        // (loading refuses to upscale).
         let result = dataset
             .load_view(index, scale)
+            .or_else(|_| dataset.load_view(index, ImageScale::Factor(1)))
             .map(|v| Arc::new(v.image))
             .map_err(|e| e.to_string());
         let _ = results.send(WorkerResult::Photo {

@@ -71,8 +71,13 @@ pub fn palette(overrides: &[String]) -> anyhow::Result<Palette> {
 }
 
 pub fn parse_scale(text: &str) -> Result<ImageScale, String> {
-    ImageScale::parse(text)
-        .ok_or_else(|| format!("bad scale {text:?}: use 1, 2, 4, 8, 0.5, 0.25, 0.125 or w<width>"))
+    ImageScale::parse(text).ok_or_else(|| {
+        format!(
+            "bad scale {text:?}: use 1, 2, 4, 8, 0.5, 0.25, 0.125 or w<width> (a width from 1 to \
+             {})",
+            damage_twin::scene::limits::MAX_IMAGE_SIDE
+        )
+    })
 }
 
 pub fn parse_background(text: &str) -> Result<Vec3, String> {

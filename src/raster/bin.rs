@@ -140,8 +140,10 @@ pub(crate) struct TileBins {
 }
 
 impl TileBins {
+    /// Tiles of the grid, multiplied in `usize`: in `u32` a 4294967295² frame's 2^28 × 2^28
+    /// tiles wrapped to 0.
     pub fn tile_count(&self) -> usize {
-        (self.tiles_x * self.tiles_y) as usize
+        self.tiles_x as usize * self.tiles_y as usize
     }
 
     /// Pixel columns and rows of `tile` inside the image, `(columns, rows)`, at most 16 each.
@@ -176,6 +178,8 @@ impl TileBins {
         let (tiles_x, tiles_y) = tile_grid(width, height);
         self.tiles_x = tiles_x;
         self.tiles_y = tiles_y;
+        // Tile ids in `usize` (`ty * tiles_x + tx` can pass `u32::MAX` on a huge frame).
+        let tiles_x = tiles_x as usize;
         self.width = width;
         self.height = height;
         let n = projected.radii.len();
@@ -203,9 +207,9 @@ impl TileBins {
                 // the index breaks ties deterministically.
                 let key = ((projected.depths[g].to_bits() as u64) << 32) | g as u64;
                 self.depth_keys.push(key);
-                for ty in rect[1]..rect[3] {
-                    for tx in rect[0]..rect[2] {
-                        self.cursor[(ty * tiles_x + tx) as usize] += 1;
+                for ty in rect[1] as usize..rect[3] as usize {
+                    for tx in rect[0] as usize..rect[2] as usize {
+                        self.cursor[ty * tiles_x + tx] += 1;
                     }
                 }
             }
@@ -223,9 +227,9 @@ impl TileBins {
         for key in &self.depth_keys {
             let g = (*key & 0xffff_ffff) as u32;
             let rect = self.rects[g as usize];
-            for ty in rect[1]..rect[3] {
-                for tx in rect[0]..rect[2] {
-                    let slot = &mut self.cursor[(ty * tiles_x + tx) as usize];
+            for ty in rect[1] as usize..rect[3] as usize {
+                for tx in rect[0] as usize..rect[2] as usize {
+                    let slot = &mut self.cursor[ty * tiles_x + tx];
                     self.gaussian_ids[*slot as usize] = g;
                     *slot += 1;
                 }
@@ -269,6 +273,20 @@ mod tests {
         // Extent reaching the centre 16.5 of the first pixel of tile 1.
         let r = tile_rect(Vec2::new(12.0, 8.0), 10, Vec2::new(4.6, 3.0), 64, 64);
         assert_eq!(r, [0, 0, 2, 1]);
+    }
+
+    #[test]
+    fn tile_counts_of_huge_frames_do_not_wrap() {
+        // The 4294967295 × 4294967295 camera: 2^28 tiles a side, 2^56 in all (the u32
+        // product was 0). The scene readers refuse such a camera long before it gets here.
+        let (tiles_x, tiles_y) = tile_grid(u32::MAX, u32::MAX);
+        assert_eq!((tiles_x, tiles_y), (1 << 28, 1 << 28));
+        let bins = TileBins {
+            tiles_x,
+            tiles_y,
+            ..TileBins::default()
+        };
+        assert_eq!(bins.tile_count(), 1usize << 56);
     }
 
     #[test]

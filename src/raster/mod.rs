@@ -375,7 +375,8 @@ impl Rasterizer {
             n,
             "backward needs the forward of the same splats"
         );
-        let pixels = (self.width * self.height) as usize;
+        // In `usize`: the `u32` product wraps past 65536 × 65536.
+        let pixels = self.width as usize * self.height as usize;
         assert_eq!(v_out.color.len(), pixels * 3, "v_color has the wrong size");
         if grads.v_means.len() != n
             || grads.v_sh.len() != splats.sh.len()

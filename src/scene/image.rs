@@ -2,6 +2,8 @@
 //! first; colour is RGB interleaved `f32` in `[0, 1]` as stored (sRGB values, no linearisation,
 //! as 3DGS trains).
 
+use crate::scene::limits::MAX_IMAGE_SIDE;
+
 /// An RGB image, `data[(y * width + x) * 3 + c]`.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RgbImage {
@@ -94,7 +96,9 @@ pub enum ImageScale {
 }
 
 impl ImageScale {
-    /// The size an image of `width × height` is loaded at; never below 1×1.
+    /// The size an image of `width × height` is loaded at; never below 1×1 and never above the
+    /// image itself (a target width beyond the image's gives the image's size), so a scaled
+    /// frame has no more pixels than its camera. [`ImageScale::checked_apply`] refuses instead.
     pub fn apply(self, width: u32, height: u32) -> (u32, u32) {
         match self {
             ImageScale::Factor(f) => {
@@ -102,18 +106,37 @@ impl ImageScale {
                 ((width / f).max(1), (height / f).max(1))
             }
             ImageScale::Width(w) => {
-                let w = w.max(1);
+                let w = w.clamp(1, width.max(1));
                 let h = (height as f64 * w as f64 / width.max(1) as f64).round() as u32;
-                (w, h.max(1))
+                (w, h.clamp(1, height.max(1)))
             }
         }
     }
 
+    /// [`ImageScale::apply`] for loading an image as stored: a target width beyond the image's
+    /// (an upscale) or beyond `limits::MAX_IMAGE_SIDE` is an error saying so; the caller adds the
+    /// file.
+    pub fn checked_apply(self, width: u32, height: u32) -> Result<(u32, u32), String> {
+        match self {
+            ImageScale::Width(w) if w > MAX_IMAGE_SIDE => Err(format!(
+                "scale w{w} is wider than the largest image ({MAX_IMAGE_SIDE} pixels)"
+            )),
+            ImageScale::Width(w) if w > width => Err(format!(
+                "scale w{w} would upscale the {width}×{height} image: its width is at most {width}"
+            )),
+            _ => Ok(self.apply(width, height)),
+        }
+    }
+
     /// Parses the CLI spelling: `1`, `2`, `4`, `8` (factors), `0.5`, `0.25`, `0.125`
-    /// (fractions), or `w960` (a target width).
+    /// (fractions), or `w960` (a target width, 1 to `limits::MAX_IMAGE_SIDE`).
     pub fn parse(text: &str) -> Option<ImageScale> {
         if let Some(w) = text.strip_prefix('w') {
-            return w.parse().ok().filter(|&w| w > 0).map(ImageScale::Width);
+            return w
+                .parse()
+                .ok()
+                .filter(|&w| w > 0 && w <= MAX_IMAGE_SIDE)
+                .map(ImageScale::Width);
         }
         if let Ok(f) = text.parse::<u32>() {
             return [1, 2, 4, 8].contains(&f).then_some(ImageScale::Factor(f));
@@ -137,6 +160,28 @@ mod tests {
         assert_eq!(ImageScale::parse("w960"), Some(ImageScale::Width(960)));
         assert_eq!(ImageScale::parse("3"), None);
         assert_eq!(ImageScale::parse("w0"), None);
+        assert_eq!(ImageScale::parse("w32768"), Some(ImageScale::Width(32_768)));
+        assert_eq!(ImageScale::parse("w999999"), None);
+    }
+
+    #[test]
+    fn loading_never_upscales() {
+        // The issue's `--scale w999999` on an 800 × 800 image asked for 10^12 pixels.
+        let err = ImageScale::Width(999_999)
+            .checked_apply(800, 800)
+            .unwrap_err();
+        assert!(err.contains("w999999"), "{err}");
+        let err = ImageScale::Width(801).checked_apply(800, 600).unwrap_err();
+        assert!(err.contains("upscale") && err.contains("800×600"), "{err}");
+        assert_eq!(
+            ImageScale::Width(800).checked_apply(800, 600),
+            Ok((800, 600))
+        );
+        assert_eq!(ImageScale::Factor(8).checked_apply(800, 600), Ok((100, 75)));
+        // `apply` keeps a scaled frame within its camera: a thin 1 × 32768 camera at w32768
+        // would otherwise be 32768 × 2^30 pixels.
+        assert_eq!(ImageScale::Width(32_768).apply(1, 32_768), (1, 32_768));
+        assert_eq!(ImageScale::Width(5000).apply(800, 600), (800, 600));
     }
 
     #[test]

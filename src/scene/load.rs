@@ -6,20 +6,33 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use crate::scene::DamageClass;
+use crate::scene::atomic::write_atomic;
+use crate::scene::limits::{MAX_IMAGE_SIDE, check_image_size};
 use crate::scene::masks::{read_view_masks, resize_mask};
 use crate::scene::undistort::{undistort_mask, undistort_rgb};
 use crate::scene::{
     Camera, Dataset, Distortion, ImageScale, LoadedView, Mask, RgbImage, SceneError, View,
 };
 
-fn decode(path: &Path) -> Result<image::DynamicImage, SceneError> {
-    let reader = image::ImageReader::open(path)
-        .map_err(|e| SceneError::io(path, e))?
+/// Decodes an image or mask file: a regular file only, its header's size within
+/// `limits::check_image_size` before any pixel buffer is allocated, and the decoder's own
+/// allocation limit (the `image` crate's default, 512 MiB) kept.
+pub(crate) fn decode(path: &Path) -> Result<image::DynamicImage, SceneError> {
+    let file = crate::scene::files::open_regular(path)?;
+    let mut reader = image::ImageReader::new(std::io::BufReader::new(file))
         .with_guessed_format()
         .map_err(|e| SceneError::io(path, e))?;
-    reader
-        .decode()
-        .map_err(|e| SceneError::invalid(path, format!("cannot decode image: {e}")))
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_IMAGE_SIDE);
+    limits.max_image_height = Some(MAX_IMAGE_SIDE);
+    reader.limits(limits);
+    let cannot =
+        |e: image::ImageError| SceneError::invalid(path, format!("cannot decode image: {e}"));
+    let decoder = reader.into_decoder().map_err(cannot)?;
+    let (width, height) = image::ImageDecoder::dimensions(&decoder);
+    check_image_size(u64::from(width), u64::from(height))
+        .map_err(|m| SceneError::invalid(path, m))?;
+    image::DynamicImage::from_decoder(decoder).map_err(cannot)
 }
 
 /// Loads an image as RGB in `[0, 1]`; an alpha channel is composited on `background`
@@ -56,7 +69,26 @@ pub fn load_image(path: &Path) -> Result<RgbImage, SceneError> {
     load_image_with_background(path, [0.0; 3])
 }
 
-/// Saves an image as 8-bit RGB PNG (values clamped to `[0, 1]`).
+/// Encodes `image` as PNG in memory and writes it atomically (`atomic::write_atomic`), so a
+/// failed save never leaves half a file under `path`.
+fn write_png_atomic<P>(
+    path: &Path,
+    image: &image::ImageBuffer<P, Vec<u8>>,
+) -> Result<(), SceneError>
+where
+    P: image::PixelWithColorType<Subpixel = u8>,
+{
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    image
+        .write_to(&mut bytes, image::ImageFormat::Png)
+        .map_err(|e| SceneError::invalid(path, format!("cannot write PNG: {e}")))?;
+    write_atomic(path, |w| {
+        use std::io::Write;
+        w.write_all(bytes.get_ref())
+    })
+}
+
+/// Saves an image as 8-bit RGB PNG (values clamped to `[0, 1]`), atomically.
 pub fn save_png(path: &Path, image: &RgbImage) -> Result<(), SceneError> {
     if image.data.len() != image.pixel_count() * 3 {
         return Err(SceneError::invalid(
@@ -69,13 +101,11 @@ pub fn save_png(path: &Path, image: &RgbImage) -> Result<(), SceneError> {
             ),
         ));
     }
-    image
-        .to_rgb8()
-        .save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| SceneError::invalid(path, format!("cannot write PNG: {e}")))
+    write_png_atomic(path, &image.to_rgb8())
 }
 
-/// Saves a mask as an 8-bit grey PNG, 255 where set (the per-class mask format it reads back).
+/// Saves a mask as an 8-bit grey PNG, 255 where set (the per-class mask format it reads back),
+/// atomically.
 pub fn save_mask_png(path: &Path, mask: &Mask) -> Result<(), SceneError> {
     let bytes = mask
         .data
@@ -93,8 +123,7 @@ pub fn save_mask_png(path: &Path, mask: &Mask) -> Result<(), SceneError> {
             ),
         )
     })?;
-    img.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| SceneError::invalid(path, format!("cannot write PNG: {e}")))
+    write_png_atomic(path, &img)
 }
 
 /// Resizes an image. An exact integer downscale (both axes by the same `f`) averages each
@@ -197,7 +226,7 @@ impl Dataset {
         if let Some(d) = &distortion {
             image = undistort_rgb(&image, d, &camera.intrinsics);
         }
-        let (width, height) = scale.apply(stored.0, stored.1);
+        let (width, height) = loaded_size(view, scale, stored)?;
         let masks = match &self.masks_dir {
             Some(dir) => read_masks_at(
                 dir,
@@ -228,11 +257,9 @@ impl Dataset {
         scale: ImageScale,
     ) -> Result<(Camera, BTreeMap<DamageClass, Mask>), SceneError> {
         let view = self.view(index)?;
-        let path = &view.image_path;
-        let stored = image::image_dimensions(path)
-            .map_err(|e| SceneError::invalid(path, format!("cannot read the image size: {e}")))?;
+        let stored = crate::scene::files::image_size(&view.image_path)?;
         let (camera, distortion) = stored_geometry(view, stored)?;
-        let (width, height) = scale.apply(stored.0, stored.1);
+        let (width, height) = loaded_size(view, scale, stored)?;
         let masks = read_masks_at(
             masks_dir,
             view,
@@ -254,10 +281,22 @@ impl Dataset {
     }
 }
 
+/// The size a view's image is loaded at: `scale` applied to the stored size, refused (naming the
+/// image) when it would upscale the image or exceed the size limits.
+fn loaded_size(
+    view: &View,
+    scale: ImageScale,
+    stored: (u32, u32),
+) -> Result<(u32, u32), SceneError> {
+    scale
+        .checked_apply(stored.0, stored.1)
+        .map_err(|m| SceneError::invalid(&view.image_path, m))
+}
+
 /// The view's camera and distortion for its image as stored (`stored` = width, height): as given
 /// when the sizes agree, scaled for a copy pre-downscaled by 2, 4 or 8, else an error naming the
 /// image.
-fn stored_geometry(
+pub(crate) fn stored_geometry(
     view: &View,
     stored: (u32, u32),
 ) -> Result<(Camera, Option<Distortion>), SceneError> {
@@ -328,6 +367,32 @@ mod tests {
         assert_eq!(downscale_factor((1297, 840), (649, 420)), Some(2));
         assert_eq!(downscale_factor((1297, 840), (162, 105)), Some(8));
         assert_eq!(downscale_factor((1297, 840), (600, 420)), None);
+    }
+
+    #[test]
+    fn a_header_claiming_too_many_pixels_is_refused_before_decoding() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("lie.png");
+        image::RgbImage::new(1, 1).save(&path).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        // IHDR: 20000 × 20000 (each side allowed, 4·10^8 pixels not), checksum fixed so the
+        // decoder believes it.
+        bytes[16..20].copy_from_slice(&20_000u32.to_be_bytes());
+        bytes[20..24].copy_from_slice(&20_000u32.to_be_bytes());
+        let crc = bytes[12..29].iter().fold(!0u32, |mut crc, &b| {
+            crc ^= u32::from(b);
+            for _ in 0..8 {
+                crc = (crc >> 1) ^ (0xEDB8_8320 & 0u32.wrapping_sub(crc & 1));
+            }
+            crc
+        });
+        bytes[29..33].copy_from_slice(&(!crc).to_be_bytes());
+        std::fs::write(&path, bytes).unwrap();
+        let err = load_image(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("lie.png") && err.contains("400000000 pixels"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -6,6 +6,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use crate::scene::DamageClass;
+use crate::scene::files::{EntryBudget, list_dir};
+use crate::scene::limits::MAX_LISTED_ENTRIES;
+use crate::scene::load::decode;
 use crate::scene::{Mask, SceneError};
 
 /// Largest Euclidean RGB distance at which a colour-coded pixel still counts as a palette colour.
@@ -25,13 +28,11 @@ fn is_png(path: &Path) -> bool {
             .is_some_and(|e| e.eq_ignore_ascii_case("png"))
 }
 
-/// PNG files directly in `dir`, sorted; an unreadable or missing folder gives none.
-fn png_files(dir: &Path) -> Vec<PathBuf> {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return Vec::new();
-    };
-    let mut files: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
+/// PNG files directly in `dir`, sorted, within the entry budget; an unreadable or missing folder
+/// gives none.
+fn png_files(dir: &Path, budget: &mut EntryBudget) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = list_dir(dir, budget)
+        .into_iter()
         .filter(|p| is_png(p))
         .collect();
     files.sort();
@@ -43,16 +44,25 @@ fn png_files(dir: &Path) -> Vec<PathBuf> {
 /// masks are decoded: cost grows with their pixel count; rayon spreads it over the cores).
 /// Root-level masks that cannot be decoded, or are single-channel (no class), count for nothing —
 /// `load_masks` reports them as errors when a view is loaded. A missing folder counts nothing.
+/// At most `limits::MAX_LISTED_ENTRIES` folder entries are looked at.
 pub fn count_masks(masks_dir: &Path) -> BTreeMap<DamageClass, usize> {
+    count_masks_within(masks_dir, &mut EntryBudget::new(MAX_LISTED_ENTRIES))
+}
+
+/// [`count_masks`] looking at no more folder entries than `budget` has left.
+pub(crate) fn count_masks_within(
+    masks_dir: &Path,
+    budget: &mut EntryBudget,
+) -> BTreeMap<DamageClass, usize> {
     use rayon::prelude::*;
     let mut counts = BTreeMap::new();
     for class in DamageClass::ALL {
-        let n = png_files(&masks_dir.join(class.id())).len();
+        let n = png_files(&masks_dir.join(class.id()), budget).len();
         if n > 0 {
             counts.insert(class, n);
         }
     }
-    let present: Vec<[bool; 3]> = png_files(masks_dir)
+    let present: Vec<[bool; 3]> = png_files(masks_dir, budget)
         .par_iter()
         .filter_map(|path| read_colour_mask_classes(path).ok())
         .collect();
@@ -82,16 +92,6 @@ pub fn default_palette() -> BTreeMap<DamageClass, [u8; 3]> {
         .into_iter()
         .map(|c| (c, c.default_colour()))
         .collect()
-}
-
-fn decode(path: &Path) -> Result<image::DynamicImage, SceneError> {
-    let reader = image::ImageReader::open(path)
-        .map_err(|e| SceneError::io(path, e))?
-        .with_guessed_format()
-        .map_err(|e| SceneError::io(path, e))?;
-    reader
-        .decode()
-        .map_err(|e| SceneError::invalid(path, format!("cannot decode image: {e}")))
 }
 
 /// Reads a per-class binary mask: a pixel is damage when any colour channel is above 127 (8-bit)

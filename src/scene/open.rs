@@ -1,11 +1,16 @@
 //! `Dataset::open`: recognises a dataset folder (COLMAP `sparse/` + `images/`, `transforms.json`,
 //! NeRF-synthetic `transforms_train.json`) and reads its metadata into a `Dataset`.
-//! Reads no pixels (only image headers where a format omits the size); never decodes masks.
+//! Reads no pixels: only each view's image header, to check its camera against the image as
+//! stored before anything is sized from it. Never decodes damage masks per view.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
-use crate::scene::colmap::{self, ColmapModel};
+use crate::scene::colmap::{self, ColmapModel, ColmapPoint};
+use crate::scene::files::{EntryBudget, image_size, list_dir, walk_files};
+use crate::scene::limits::{
+    MAX_LISTED_ENTRIES, MAX_POINT_COORDINATE, MAX_VIEWS, check_image_size, is_usable_position,
+};
 use crate::scene::{
     Camera, Dataset, DatasetFormat, Distortion, Intrinsics, PointCloud, SceneError, Split, View,
 };
@@ -34,12 +39,9 @@ pub(crate) fn is_image_file(path: &Path) -> bool {
 }
 
 /// Image files in `dir` (not recursive), sorted; an unreadable or missing folder lists nothing.
-pub(crate) fn list_images(dir: &Path) -> Vec<PathBuf> {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return Vec::new();
-    };
-    let mut files: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
+pub(crate) fn list_images(dir: &Path, budget: &mut EntryBudget) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = list_dir(dir, budget)
+        .into_iter()
         .filter(|p| p.is_file() && is_image_file(p))
         .collect();
     files.sort();
@@ -47,32 +49,55 @@ pub(crate) fn list_images(dir: &Path) -> Vec<PathBuf> {
 }
 
 /// Image files under `dir` and its sub-folders (COLMAP names may contain `/`), as `/`-separated
-/// paths relative to `dir`, sorted. Depth-limited so a link cycle cannot recurse forever.
-fn list_images_recursive(dir: &Path) -> Vec<String> {
-    fn walk(dir: &Path, prefix: &str, depth: usize, out: &mut Vec<String>) {
-        let Ok(entries) = std::fs::read_dir(dir) else {
-            return;
-        };
-        for entry in entries.filter_map(|e| e.ok()) {
-            let path = entry.path();
-            let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
-                continue;
-            };
-            if name.starts_with('.') {
-                continue;
-            }
-            let rel = format!("{prefix}{name}");
-            if path.is_dir() && depth < 8 {
-                walk(&path, &format!("{rel}/"), depth + 1, out);
-            } else if path.is_file() && is_image_file(&path) {
-                out.push(rel);
-            }
-        }
+/// paths relative to `dir`, sorted. Eight folders deep at most, no link followed back into the
+/// walk, every entry counted against `budget`.
+fn list_images_recursive(dir: &Path, budget: &mut EntryBudget) -> Vec<String> {
+    walk_files(dir, 8, budget, is_image_file)
+}
+
+/// The warning for a listing cut short by its budget, if it was.
+pub(crate) fn budget_warning(budget: &EntryBudget) -> Option<String> {
+    budget.exhausted_in().map(|dir| {
+        format!(
+            "stopped listing files after {MAX_LISTED_ENTRIES} folder entries (in {}): image and \
+             mask counts are incomplete",
+            dir.display()
+        )
+    })
+}
+
+/// Refuses a dataset listing more views than `MAX_VIEWS`, naming the file that lists them.
+pub(crate) fn check_view_count(file: &Path, count: usize, what: &str) -> Result<(), SceneError> {
+    if count > MAX_VIEWS {
+        return Err(SceneError::invalid(
+            file,
+            format!("{count} {what}: more than the {MAX_VIEWS} views a dataset may have"),
+        ));
     }
-    let mut out = Vec::new();
-    walk(dir, "", 0, &mut out);
-    out.sort();
-    out
+    Ok(())
+}
+
+/// Checks every view's camera against its image as stored, reading each file's header once
+/// (several views may share one file): the image must be within the size limits, and the same
+/// size as its camera or a copy downscaled by 2, 4 or 8 (what `load_view` accepts). Done at open,
+/// so nothing is ever sized from a camera that lies about its image.
+pub(crate) fn check_views_against_images(views: &[View]) -> Result<(), SceneError> {
+    let mut sizes: HashMap<&Path, (u32, u32)> = HashMap::new();
+    for view in views {
+        let path = view.image_path.as_path();
+        let stored = match sizes.get(path) {
+            Some(&size) => size,
+            None => {
+                let size = image_size(path)?;
+                check_image_size(u64::from(size.0), u64::from(size.1))
+                    .map_err(|m| SceneError::invalid(path, m))?;
+                sizes.insert(path, size);
+                size
+            }
+        };
+        crate::scene::load::stored_geometry(view, stored)?;
+    }
+    Ok(())
 }
 
 /// One warning for a list of names: the count, then at most a few of them.
@@ -100,10 +125,11 @@ pub(crate) fn stem_of(path: &Path) -> String {
 /// `masks/` beside the images and its per-class counts.
 pub(crate) fn find_masks(
     root: &Path,
+    budget: &mut EntryBudget,
 ) -> (Option<PathBuf>, BTreeMap<crate::scene::DamageClass, usize>) {
     let dir = root.join("masks");
     if dir.is_dir() {
-        let counts = crate::scene::masks::count_masks(&dir);
+        let counts = crate::scene::masks::count_masks_within(&dir, budget);
         (Some(dir), counts)
     } else {
         (None, BTreeMap::new())
@@ -188,6 +214,7 @@ fn open_colmap(
     };
     let cameras_file = sparse.join(format!("cameras.{ext}"));
     let images_file = sparse.join(format!("images.{ext}"));
+    let points_file = sparse.join(format!("points3D.{ext}"));
     let images_dir = root.join("images");
     if !images_dir.is_dir() {
         return Err(SceneError::invalid(
@@ -195,8 +222,10 @@ fn open_colmap(
             "the COLMAP model has no images/ folder beside sparse/",
         ));
     }
+    check_view_count(&images_file, model.images.len(), "registered images")?;
 
-    let on_disk = list_images_recursive(&images_dir);
+    let mut budget = EntryBudget::new(MAX_LISTED_ENTRIES);
+    let on_disk = list_images_recursive(&images_dir, &mut budget);
     let mut pinholes: BTreeMap<u32, (Intrinsics, Option<Distortion>)> = BTreeMap::new();
     let mut views = Vec::new();
     let mut missing = Vec::new();
@@ -253,6 +282,7 @@ fn open_colmap(
         ));
     }
     views.sort_by(|a, b| (&a.name, &a.image_path).cmp(&(&b.name, &b.image_path)));
+    check_views_against_images(&views)?;
 
     let mut warnings = Vec::new();
     if !missing.is_empty() {
@@ -273,15 +303,19 @@ fn open_colmap(
         ));
     }
 
-    let points = (!model.points.is_empty()).then(|| PointCloud {
-        positions: model
-            .points
-            .iter()
-            .map(|p| glam::DVec3::from_array(p.xyz).as_vec3())
-            .collect(),
-        colours: model.points.iter().map(|p| p.rgb).collect(),
-    });
-    let (masks_dir, mask_counts) = find_masks(root);
+    let (points, skipped) = usable_points(&model.points);
+    if !skipped.is_empty() {
+        let ids: Vec<String> = skipped.iter().map(|id| format!("id {id}")).collect();
+        warnings.push(summarise(
+            &format!(
+                "points of {} skipped (a coordinate not finite or beyond ±{MAX_POINT_COORDINATE:e})",
+                points_file.display()
+            ),
+            &ids,
+        ));
+    }
+    let (masks_dir, mask_counts) = find_masks(root, &mut budget);
+    warnings.extend(budget_warning(&budget));
     Ok(Dataset {
         root: root.to_path_buf(),
         format,
@@ -295,4 +329,22 @@ fn open_colmap(
         background: options.background,
         warnings,
     })
+}
+
+/// The SfM points that can seed Gaussians (`limits::is_usable_position`), and the COLMAP ids of
+/// those skipped. No usable point gives `None`.
+fn usable_points(points: &[ColmapPoint]) -> (Option<PointCloud>, Vec<u64>) {
+    let mut cloud = PointCloud::default();
+    let mut skipped = Vec::new();
+    for p in points {
+        if is_usable_position(p.xyz) {
+            cloud
+                .positions
+                .push(glam::DVec3::from_array(p.xyz).as_vec3());
+            cloud.colours.push(p.rgb);
+        } else {
+            skipped.push(p.id);
+        }
+    }
+    ((!cloud.is_empty()).then_some(cloud), skipped)
 }

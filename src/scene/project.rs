@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::scene::atomic::write_atomic;
+use crate::scene::files::read_regular;
+use crate::scene::limits::{MAX_IMAGE_SIDE, MAX_PROJECT_BYTES};
 use crate::scene::{DamageClass, NEW_DAMAGE_COLOUR};
 use crate::scene::{ImageScale, SceneError};
 
@@ -198,13 +200,30 @@ impl Project {
                 "settings.background {bg:?} is not a colour in [0, 1]"
             ));
         }
+        // The scales `ImageScale::parse` accepts: a file cannot ask for more than a user can.
+        let scale_ok = match self.settings.scale {
+            ImageScale::Factor(f) => [1, 2, 4, 8].contains(&f),
+            ImageScale::Width(w) => (1..=MAX_IMAGE_SIDE).contains(&w),
+        };
+        if !scale_ok {
+            return Err(format!(
+                "settings.scale {:?} is not a factor 1, 2, 4 or 8 or a width 1 to {MAX_IMAGE_SIDE}",
+                self.settings.scale
+            ));
+        }
         Ok(())
     }
 
     /// Reads `twin.ron`. A newer format version than `PROJECT_FORMAT_VERSION` is refused
     /// before anything else is interpreted.
     pub fn load(path: &Path) -> Result<Project, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
+        let bytes = read_regular(path, MAX_PROJECT_BYTES)?;
+        let text = String::from_utf8(bytes).map_err(|e| {
+            SceneError::invalid(
+                path,
+                format!("not UTF-8 text (byte {})", e.utf8_error().valid_up_to()),
+            )
+        })?;
         let probe: VersionProbe = ron::from_str(&text)
             .map_err(|e| SceneError::invalid(path, format!("not a twin project file: {e}")))?;
         if probe.format_version > PROJECT_FORMAT_VERSION {

@@ -2,14 +2,19 @@
 //! and `transforms_test.json`). OpenGL camera-to-world poses become COLMAP world-to-camera ones here,
 //! once. Frames whose image is missing are skipped with one warning per file; no pixels are read.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use crate::scene::files::{EntryBudget, image_size, read_regular};
+use crate::scene::limits::{
+    MAX_LISTED_ENTRIES, MAX_POINT_COORDINATE, MAX_TRANSFORMS_BYTES, check_image_size,
+};
 use crate::scene::open::{
-    OpenOptions, count_models, find_masks, is_image_file, list_images, stem_of, summarise,
+    OpenOptions, budget_warning, check_view_count, check_views_against_images, count_models,
+    find_masks, is_image_file, list_images, stem_of, summarise,
 };
 use crate::scene::{
     Camera, Dataset, DatasetFormat, Distortion, Intrinsics, SceneError, Split, View,
@@ -68,6 +73,32 @@ struct Frame {
     lens: Lens,
 }
 
+/// Only the number of frames, counted without keeping them: a first pass so that a file listing
+/// millions of frames is refused before they are parsed into memory.
+#[derive(Deserialize)]
+struct FrameCount {
+    #[serde(deserialize_with = "count_elements")]
+    frames: usize,
+}
+
+fn count_elements<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<usize, D::Error> {
+    struct Counter;
+    impl<'de> serde::de::Visitor<'de> for Counter {
+        type Value = usize;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a list of frames")
+        }
+        fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<usize, A::Error> {
+            let mut n = 0usize;
+            while seq.next_element::<serde::de::IgnoredAny>()?.is_some() {
+                n += 1;
+            }
+            Ok(n)
+        }
+    }
+    deserializer.deserialize_seq(Counter)
+}
+
 #[derive(Debug, Deserialize)]
 struct TransformsFile {
     #[serde(flatten)]
@@ -122,7 +153,20 @@ pub fn open_transforms(root: &Path, options: &OpenOptions) -> Result<Dataset, Sc
         if let Some(ply) = p.ply_file_path {
             let path = root.join(&ply);
             if path.is_file() {
-                points = Some(crate::scene::ply::read_point_cloud(&path)?);
+                let (cloud, skipped) = crate::scene::ply::read_point_cloud_skipping(&path)?;
+                if !skipped.is_empty() {
+                    let vertices: Vec<String> =
+                        skipped.iter().map(|v| format!("vertex {v}")).collect();
+                    warnings.push(summarise(
+                        &format!(
+                            "points of {} skipped (a coordinate not finite or beyond \
+                             ±{MAX_POINT_COORDINATE:e})",
+                            path.display()
+                        ),
+                        &vertices,
+                    ));
+                }
+                points = (!cloud.is_empty()).then_some(cloud);
             } else {
                 warnings.push(format!(
                     "ply_file_path {} does not exist: no initial points",
@@ -138,8 +182,13 @@ pub fn open_transforms(root: &Path, options: &OpenOptions) -> Result<Dataset, Sc
         ));
     }
     views.sort_by(|a, b| (&a.name, &a.image_path).cmp(&(&b.name, &b.image_path)));
+    check_views_against_images(&views)?;
 
-    let on_disk: Vec<PathBuf> = image_dirs.iter().flat_map(|d| list_images(d)).collect();
+    let mut budget = EntryBudget::new(MAX_LISTED_ENTRIES);
+    let on_disk: Vec<PathBuf> = image_dirs
+        .iter()
+        .flat_map(|d| list_images(d, &mut budget))
+        .collect();
     let unregistered: Vec<String> = on_disk
         .iter()
         .filter(|p| !referenced.contains(*p))
@@ -152,7 +201,8 @@ pub fn open_transforms(root: &Path, options: &OpenOptions) -> Result<Dataset, Sc
         ));
     }
 
-    let (masks_dir, mask_counts) = find_masks(root);
+    let (masks_dir, mask_counts) = find_masks(root, &mut budget);
+    warnings.extend(budget_warning(&budget));
     Ok(Dataset {
         root: root.to_path_buf(),
         format: DatasetFormat::Transforms,
@@ -202,9 +252,13 @@ fn read_json(
     split: Split,
     warnings: &mut Vec<String>,
 ) -> Result<Parsed, SceneError> {
-    let bytes = std::fs::read(json_path).map_err(|e| SceneError::io(json_path, e))?;
-    let file: TransformsFile = serde_json::from_slice(&bytes)
-        .map_err(|e| SceneError::invalid(json_path, format!("not a transforms file: {e}")))?;
+    let bytes = read_regular(json_path, MAX_TRANSFORMS_BYTES)?;
+    let not_transforms = |e: serde_json::Error| {
+        SceneError::invalid(json_path, format!("not a transforms file: {e}"))
+    };
+    let count: FrameCount = serde_json::from_slice(&bytes).map_err(not_transforms)?;
+    check_view_count(json_path, count.frames, "frames")?;
+    let file: TransformsFile = serde_json::from_slice(&bytes).map_err(not_transforms)?;
     let mut out = Parsed {
         views: Vec::new(),
         image_dirs: BTreeSet::new(),
@@ -213,6 +267,7 @@ fn read_json(
         ply_file_path: file.ply_file_path.clone(),
     };
     let mut missing = Vec::new();
+    let mut sizes = HashMap::new();
     for (index, frame) in file.frames.iter().enumerate() {
         let listed = root.join(&frame.file_path);
         if let Some(dir) = listed.parent() {
@@ -230,8 +285,8 @@ fn read_json(
         };
         let c2w = matrix(&frame.transform_matrix).map_err(invalid)?;
         let lens = frame.lens.or(&file.lens);
-        let (intrinsics, distortion, model) = lens_to_pinhole(&lens, &image_path, json_path)
-            .map_err(|e| match e {
+        let (intrinsics, distortion, model) =
+            lens_to_pinhole(&lens, &image_path, json_path, &mut sizes).map_err(|e| match e {
                 LensError::Invalid(m) => invalid(m),
                 LensError::Scene(e) => e,
             })?;
@@ -305,11 +360,13 @@ enum LensError {
     Scene(SceneError),
 }
 
-/// Intrinsics of one frame; width and height come from the image header when not given.
+/// Intrinsics of one frame; width and height come from the image header when not given (read
+/// once per file: `sizes` keeps those already read).
 fn lens_to_pinhole(
     lens: &Lens,
     image_path: &Path,
     json_path: &Path,
+    sizes: &mut HashMap<PathBuf, (u32, u32)>,
 ) -> Result<(Intrinsics, Option<Distortion>, String), LensError> {
     let model = lens.camera_model.as_deref();
     if !matches!(model, None | Some("OPENCV") | Some("PINHOLE")) || lens.is_fisheye == Some(true) {
@@ -332,21 +389,24 @@ fn lens_to_pinhole(
     let (w, h) = match (lens.w, lens.h) {
         (Some(w), Some(h)) => (w, h),
         _ => {
-            let (w, h) = image::image_dimensions(image_path).map_err(|e| {
-                LensError::Scene(SceneError::invalid(
-                    image_path,
-                    format!("cannot read the image size: {e}"),
-                ))
-            })?;
+            let (w, h) = match sizes.get(image_path) {
+                Some(&size) => size,
+                None => {
+                    let size = image_size(image_path).map_err(LensError::Scene)?;
+                    sizes.insert(image_path.to_path_buf(), size);
+                    size
+                }
+            };
             (w as f64, h as f64)
         }
     };
-    // `!(x > 0)` rejects NaN as well.
-    if !(w >= 1.0 && h >= 1.0 && w < 1e6 && h < 1e6) {
+    // `!(x >= 1)` rejects NaN as well; the limit keeps the rounding below exact.
+    if !(w >= 1.0 && h >= 1.0 && w <= f64::from(u32::MAX) && h <= f64::from(u32::MAX)) {
         return Err(LensError::Invalid(format!(
             "image size {w}x{h} out of range"
         )));
     }
+    check_image_size(w.round() as u64, h.round() as u64).map_err(LensError::Invalid)?;
     let fx = match (lens.fl_x, lens.camera_angle_x) {
         (Some(f), _) => f,
         (None, Some(a)) => 0.5 * w / (0.5 * a).tan(),

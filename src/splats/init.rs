@@ -7,7 +7,7 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use std::num::NonZeroUsize;
 
-use super::model::{SH_C0, SplatMeta, Splats, logit};
+use super::model::{MAX_SH_DEGREE, SH_C0, SplatMeta, Splats, logit};
 
 /// 3DGS clamps the mean squared neighbour distance at 1e-7 (`torch.clamp_min(dist2, 1e-7)`)
 /// so coincident points get a tiny, finite scale instead of `log(0) = -inf`.
@@ -44,14 +44,49 @@ impl Default for InitOptions {
     }
 }
 
+/// Most Gaussians a model may start from. 3DGS's largest published scenes end training with about
+/// 6 million; at SH degree 3 each Gaussian holds 59 floats, so 10 million are 2.4 GB of
+/// parameters before gradients and Adam state triple it.
+pub const MAX_INIT_POINTS: usize = 10_000_000;
+
+/// Largest absolute coordinate of an initial point (the limit the scene readers skip points at,
+/// `scene::limits::MAX_POINT_COORDINATE`).
+const MAX_COORDINATE: f32 = crate::scene::limits::MAX_POINT_COORDINATE as f32;
+
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum InitError {
     #[error("the point cloud is empty: nothing to initialise Gaussians from")]
     Empty,
     #[error("point {index} of the point cloud is not finite ({position:?})")]
     NonFinite { index: usize, position: [f32; 3] },
+    #[error(
+        "point {index} of the point cloud is beyond ±{MAX_COORDINATE:e} ({position:?}): no \
+         Gaussian can be trained there"
+    )]
+    OutOfRange { index: usize, position: [f32; 3] },
     #[error("the point cloud has {positions} positions but {colours} colours")]
     ColourCount { positions: usize, colours: usize },
+    #[error("SH degree {degree} is out of range: the 3DGS layout has degrees 0 to {MAX_SH_DEGREE}")]
+    ShDegree { degree: u32 },
+    #[error(
+        "more than {MAX_INIT_POINTS} initial points asked for: the most a model may start from \
+         (3DGS's largest scenes end with about 6 million Gaussians)"
+    )]
+    TooManyPoints { count: usize },
+}
+
+/// Refuses what no allocation should be attempted for: an SH degree above 3 (degree 100 asked
+/// for 12 GB of coefficients, 2^32 − 1 wrapped their count) and more than `MAX_INIT_POINTS`.
+fn check_request(points: usize, opts: &InitOptions) -> Result<(), InitError> {
+    if opts.sh_degree > MAX_SH_DEGREE {
+        return Err(InitError::ShDegree {
+            degree: opts.sh_degree,
+        });
+    }
+    if points > MAX_INIT_POINTS {
+        return Err(InitError::TooManyPoints { count: points });
+    }
+    Ok(())
 }
 
 impl SplatMeta {
@@ -100,12 +135,15 @@ pub fn mean_neighbour_dist2(points: &[Vec3]) -> Vec<f32> {
 /// Gaussians at the points: isotropic scale `sqrt(mean squared 3-NN distance)` (3DGS), identity
 /// rotation, opacity `opts.opacity`, SH DC from the colour (`(rgb - 0.5) / SH_C0`), higher SH zero,
 /// label logits `opts.raw_label`, ids counting up from `opts.first_id`.
-/// Plain slices, so that any point source (SfM, a PLY, random) can seed a model.
+/// Plain slices, so that any point source (SfM, a PLY, random) can seed a model. Refused before
+/// anything is allocated: an SH degree above 3, more than `MAX_INIT_POINTS` points, a position
+/// not finite or beyond ±1e7.
 pub fn from_points(
     positions: &[Vec3],
     colours: &[[u8; 3]],
     opts: &InitOptions,
 ) -> Result<Splats, InitError> {
+    check_request(positions.len(), opts)?;
     if positions.is_empty() {
         return Err(InitError::Empty);
     }
@@ -117,6 +155,17 @@ pub fn from_points(
     }
     if let Some((index, p)) = positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
         return Err(InitError::NonFinite {
+            index,
+            position: p.to_array(),
+        });
+    }
+    // `!(|v| <= max)` also catches NaN, already refused above.
+    if let Some((index, p)) = positions
+        .iter()
+        .enumerate()
+        .find(|(_, p)| !(p.abs().max_element() <= MAX_COORDINATE))
+    {
+        return Err(InitError::OutOfRange {
             index,
             position: p.to_array(),
         });
@@ -147,7 +196,13 @@ pub fn from_points(
 /// `n` points uniform in `[-half_extent, half_extent]³` with uniform random colours (3DGS's
 /// NeRF-synthetic initialisation uses 100 000 points in `[-1.3, 1.3]³`). Positions and colours,
 /// to feed to `from_points`.
+///
+/// An `n` above `MAX_INIT_POINTS` is not generated: the cloud then holds `MAX_INIT_POINTS + 1`
+/// points, which `from_points` refuses with `InitError::TooManyPoints`. That keeps the work
+/// bounded (`--init-points 18446744073709551615` overflowed the capacity) while this function
+/// stays infallible; [`try_random_points`] refuses at once.
 pub fn random_points(n: usize, half_extent: f32, seed: u64) -> (Vec<Vec3>, Vec<[u8; 3]>) {
+    let n = n.min(MAX_INIT_POINTS + 1);
     let mut rng = fastrand::Rng::with_seed(seed);
     let mut positions = Vec::with_capacity(n);
     let mut colours = Vec::with_capacity(n);
@@ -157,6 +212,18 @@ pub fn random_points(n: usize, half_extent: f32, seed: u64) -> (Vec<Vec3>, Vec<[
         colours.push([rng.u8(..), rng.u8(..), rng.u8(..)]);
     }
     (positions, colours)
+}
+
+/// [`random_points`] that refuses more than `MAX_INIT_POINTS` points before generating any.
+pub fn try_random_points(
+    n: usize,
+    half_extent: f32,
+    seed: u64,
+) -> Result<(Vec<Vec3>, Vec<[u8; 3]>), InitError> {
+    if n > MAX_INIT_POINTS {
+        return Err(InitError::TooManyPoints { count: n });
+    }
+    Ok(random_points(n, half_extent, seed))
 }
 
 #[cfg(test)]
@@ -233,6 +300,46 @@ mod tests {
         assert!(matches!(
             from_points(&c.0, &c.1, &InitOptions::default()),
             Err(InitError::NonFinite { index: 1, .. })
+        ));
+    }
+
+    #[test]
+    fn sh_degrees_above_three_are_refused_before_allocating() {
+        let c = cloud(&[[0.0; 3], [1.0, 0.0, 0.0]]);
+        for degree in [4, 100, u32::MAX] {
+            let opts = InitOptions {
+                sh_degree: degree,
+                ..InitOptions::default()
+            };
+            let err = from_points(&c.0, &c.1, &opts).unwrap_err();
+            assert_eq!(err, InitError::ShDegree { degree });
+            assert!(err.to_string().contains(&degree.to_string()), "{err}");
+        }
+        let opts = InitOptions {
+            sh_degree: 3,
+            ..InitOptions::default()
+        };
+        assert_eq!(from_points(&c.0, &c.1, &opts).unwrap().sh_coeffs(), 16);
+    }
+
+    #[test]
+    fn absurd_point_counts_and_coordinates_are_refused() {
+        assert_eq!(
+            try_random_points(usize::MAX, 1.0, 0),
+            Err(InitError::TooManyPoints { count: usize::MAX })
+        );
+        assert_eq!(try_random_points(3, 1.0, 0).map(|c| c.0.len()), Ok(3));
+        // The infallible form stops at one point past the limit, which `from_points` refuses.
+        let capped = random_points(usize::MAX, 1.0, 0);
+        assert_eq!(capped.0.len(), MAX_INIT_POINTS + 1);
+        assert!(matches!(
+            from_points(&capped.0, &capped.1, &InitOptions::default()),
+            Err(InitError::TooManyPoints { .. })
+        ));
+        let far = cloud(&[[0.0; 3], [0.0, 1e20, 0.0]]);
+        assert!(matches!(
+            from_points(&far.0, &far.1, &InitOptions::default()),
+            Err(InitError::OutOfRange { index: 1, .. })
         ));
     }
 

@@ -40,9 +40,15 @@ pub struct Splats {
 /// kernels are sized for it). Three classes are used; eight leaves room for user classes.
 pub const MAX_LABEL_CHANNELS: usize = 8;
 
-/// SH coefficients per colour channel for a degree.
+/// Highest SH degree of the 3DGS layout (16 coefficients per channel), the most the renderer
+/// evaluates and the PLY format stores.
+pub const MAX_SH_DEGREE: u32 = 3;
+
+/// SH coefficients per colour channel for a degree. Computed in `usize` and saturating, so a
+/// degree no model can have (up to `u32::MAX`) gives a huge count instead of a wrapped one.
 pub const fn sh_coeffs_for_degree(degree: u32) -> usize {
-    ((degree + 1) * (degree + 1)) as usize
+    let side = degree as usize + 1;
+    side.saturating_mul(side)
 }
 
 /// The SH DC constant `Y_0^0 = 1 / (2 sqrt(pi))`: colour = SH · Y + 0.5.

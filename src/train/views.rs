@@ -126,7 +126,7 @@ pub fn initial_splats(
     views: &[TrainView],
     options: &InitialModel,
 ) -> Result<crate::splats::Splats, crate::splats::init::InitError> {
-    use crate::splats::init::{InitOptions, from_points, random_points};
+    use crate::splats::init::{InitOptions, from_points, try_random_points};
     let init = InitOptions {
         sh_degree: options.sh_degree,
         label_channels: options.label_channels,
@@ -136,7 +136,7 @@ pub fn initial_splats(
         return from_points(&points.positions, &points.colours, &init);
     }
     let (centre, half) = look_at_box(views);
-    let (mut positions, colours) = random_points(options.random_points, half, options.seed);
+    let (mut positions, colours) = try_random_points(options.random_points, half, options.seed)?;
     for p in &mut positions {
         *p += centre;
     }

@@ -7,6 +7,8 @@ use std::path::Path;
 
 use super::{CameraModel, ColmapCamera, ColmapImage, ColmapModel, ColmapPoint};
 use crate::scene::SceneError;
+use crate::scene::files::read_regular;
+use crate::scene::limits::MAX_COLMAP_BYTES;
 
 /// Reads `cameras.bin`, `images.bin` and `points3D.bin` from `dir`.
 pub fn read_binary(dir: &Path) -> Result<ColmapModel, SceneError> {
@@ -98,7 +100,7 @@ fn put_f64(out: &mut Vec<u8>, v: f64) {
 }
 
 fn read_cameras(path: &Path) -> Result<Vec<ColmapCamera>, SceneError> {
-    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    let bytes = read_regular(path, MAX_COLMAP_BYTES)?;
     let mut r = Reader::new(path, &bytes);
     // Smallest record: id, model, width, height, 3 params.
     let count = r.count("cameras", 4 + 4 + 8 + 8 + 3 * 8)?;
@@ -130,7 +132,7 @@ fn read_cameras(path: &Path) -> Result<Vec<ColmapCamera>, SceneError> {
 }
 
 fn read_images(path: &Path) -> Result<Vec<ColmapImage>, SceneError> {
-    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    let bytes = read_regular(path, MAX_COLMAP_BYTES)?;
     let mut r = Reader::new(path, &bytes);
     // Smallest record: id, qvec, tvec, camera id, 1-byte name + NUL, point count.
     let count = r.count("images", 4 + 7 * 8 + 4 + 2 + 8)?;
@@ -165,7 +167,7 @@ fn read_images(path: &Path) -> Result<Vec<ColmapImage>, SceneError> {
 }
 
 fn read_points(path: &Path) -> Result<Vec<ColmapPoint>, SceneError> {
-    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    let bytes = read_regular(path, MAX_COLMAP_BYTES)?;
     let mut r = Reader::new(path, &bytes);
     // Smallest record: id, xyz, rgb, error, track length.
     let count = r.count("points", 8 + 3 * 8 + 3 + 8 + 8)?;

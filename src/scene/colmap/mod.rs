@@ -9,6 +9,7 @@ use std::path::Path;
 
 use glam::{Quat, Vec3};
 
+use crate::scene::limits::check_image_size;
 use crate::scene::{Camera, Distortion, Intrinsics, SceneError};
 
 pub use binary::{read_binary, write_binary};
@@ -192,17 +193,11 @@ impl ColmapCamera {
                 ));
             }
         };
-        let width = u32::try_from(self.width).ok().filter(|&w| w > 0);
-        let height = u32::try_from(self.height).ok().filter(|&h| h > 0);
-        let (Some(width), Some(height)) = (width, height) else {
-            return Err(SceneError::invalid(
-                path,
-                format!(
-                    "camera {}: image size {}x{} out of range",
-                    self.id, self.width, self.height
-                ),
-            ));
-        };
+        // Within the limits before anything is sized from it (a 4294967295² camera wrapped the
+        // renderer's tile count to 0; a 999999² one asked for 312 GB).
+        check_image_size(self.width, self.height)
+            .map_err(|m| SceneError::invalid(path, format!("camera {}: {m}", self.id)))?;
+        let (width, height) = (self.width as u32, self.height as u32);
         // `!(f > 0)` rejects NaN as well.
         if !(fx > 0.0 && fy > 0.0 && fx.is_finite() && fy.is_finite())
             || ![cx, cy, k1, k2, p1, p2].iter().all(|v| v.is_finite())

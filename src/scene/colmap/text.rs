@@ -8,6 +8,8 @@ use std::str::FromStr;
 
 use super::{CameraModel, ColmapCamera, ColmapImage, ColmapModel, ColmapPoint};
 use crate::scene::SceneError;
+use crate::scene::files::read_regular;
+use crate::scene::limits::MAX_COLMAP_BYTES;
 
 /// Reads `cameras.txt`, `images.txt` and `points3D.txt` from `dir`.
 pub fn read_text(dir: &Path) -> Result<ColmapModel, SceneError> {
@@ -101,7 +103,7 @@ fn write_file(path: &Path, text: &str) -> Result<(), SceneError> {
 }
 
 fn read_file(path: &Path) -> Result<String, SceneError> {
-    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    let bytes = read_regular(path, MAX_COLMAP_BYTES)?;
     String::from_utf8(bytes).map_err(|e| {
         SceneError::invalid(
             path,

@@ -277,7 +277,7 @@ impl RowReader {
     /// elements before it are skipped. Refuses a count the rest of the file cannot hold, so a
     /// caller may allocate `count` rows.
     pub fn open(path: &Path, name: &str) -> Result<(Header, RowReader), SceneError> {
-        let file = std::fs::File::open(path).map_err(|e| SceneError::io(path, e))?;
+        let file = crate::scene::files::open_regular(path)?;
         let file_len = file.metadata().map_err(|e| SceneError::io(path, e))?.len();
         let mut reader = BufReader::with_capacity(1 << 16, file);
         let header = read_header(&mut reader, path)?;

@@ -46,5 +46,5 @@ mod header;
 mod points;
 mod splats;
 
-pub use points::{read_point_cloud, write_point_cloud};
+pub use points::{read_point_cloud, read_point_cloud_skipping, write_point_cloud};
 pub use splats::{label_property, read_splats, splat_header, standard_properties, write_splats};

@@ -1,6 +1,7 @@
 //! Coloured point clouds (`points.ply` of nerfstudio, COLMAP's exported `points3D.ply`) to and
 //! from PLY: `x y z` (float or double) and optional `red green blue` (uchar; floats are taken
-//! as 0..1). Not for splats; refuses NaN/Inf positions and empty clouds.
+//! as 0..1). Not for splats; refuses (or skips, for a dataset to warn about) NaN/Inf and absurd
+//! positions, and refuses empty clouds.
 
 use std::io::Write;
 use std::path::Path;
@@ -9,14 +10,33 @@ use glam::Vec3;
 
 use super::header::RowReader;
 use crate::scene::atomic::write_atomic;
+use crate::scene::limits::{MAX_POINT_COORDINATE, is_usable_position};
 use crate::scene::{PointCloud, SceneError};
 
 /// Grey given to points of a file without colours (the 3DGS random-init default colour).
 const DEFAULT_GREY: [u8; 3] = [128, 128, 128];
 
-/// Reads a point cloud; a file without `red green blue` gets grey points. Zero points is an
-/// error: a points file exists to initialise splats.
+/// Reads a point cloud; a file without `red green blue` gets grey points. Zero points, and a
+/// position that is not finite or beyond `limits::MAX_POINT_COORDINATE`, are errors naming the
+/// vertex: a points file exists to initialise splats.
 pub fn read_point_cloud(path: &Path) -> Result<PointCloud, SceneError> {
+    read_cloud(path, Unusable::Refuse).map(|(cloud, _)| cloud)
+}
+
+/// [`read_point_cloud`] that skips the vertices whose position cannot seed a Gaussian (not
+/// finite, or beyond `limits::MAX_POINT_COORDINATE`) and returns their indices, for the dataset
+/// to warn about. The cloud may come back empty when every vertex was skipped.
+pub fn read_point_cloud_skipping(path: &Path) -> Result<(PointCloud, Vec<usize>), SceneError> {
+    read_cloud(path, Unusable::Skip)
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum Unusable {
+    Refuse,
+    Skip,
+}
+
+fn read_cloud(path: &Path, unusable: Unusable) -> Result<(PointCloud, Vec<usize>), SceneError> {
     let (header, mut rows) = RowReader::open(path, "vertex")?;
     let bad = |msg: String| SceneError::invalid(path, msg);
     let vertex = header.element("vertex", path)?;
@@ -42,12 +62,21 @@ pub fn read_point_cloud(path: &Path) -> Result<PointCloud, SceneError> {
         positions: Vec::with_capacity(rows.count),
         colours: Vec::with_capacity(rows.count),
     };
+    let mut skipped = Vec::new();
     let mut values = Vec::with_capacity(vertex.properties.len());
     let mut index = 0usize;
     while rows.next_row(&mut values)? {
-        let p = xyz.map(|i| values[i] as f32);
-        if !p.iter().all(|v| v.is_finite()) {
-            return Err(bad(format!("vertex {index}: position {p:?} is not finite")));
+        let position = xyz.map(|i| values[i]);
+        if !is_usable_position(position) {
+            if unusable == Unusable::Refuse {
+                return Err(bad(format!(
+                    "vertex {index}: position {position:?} is not finite or beyond \
+                     ±{MAX_POINT_COORDINATE:e}"
+                )));
+            }
+            skipped.push(index);
+            index += 1;
+            continue;
         }
         let colour = match rgb {
             Some(i) => i.map(|i| {
@@ -61,11 +90,13 @@ pub fn read_point_cloud(path: &Path) -> Result<PointCloud, SceneError> {
             }),
             None => DEFAULT_GREY,
         };
-        cloud.positions.push(Vec3::from_array(p));
+        cloud
+            .positions
+            .push(Vec3::from_array(position.map(|v| v as f32)));
         cloud.colours.push(colour);
         index += 1;
     }
-    Ok(cloud)
+    Ok((cloud, skipped))
 }
 
 /// Writes `float x y z, uchar red green blue`, binary little-endian (the nerfstudio layout).

@@ -1,0 +1,4 @@
+//! Mutations and targets of `tests/fuzz_readers.rs`.
+
+pub mod mutate;
+pub mod targets;
