@@ -25,9 +25,7 @@ fn red_cluster() -> Splats {
             s.raw_opacities.push(4.0);
             // colour = SH_C0 · dc + 0.5 → (1, 0, 0)
             s.sh.extend_from_slice(&[0.5 / SH_C0, -0.5 / SH_C0, -0.5 / SH_C0]);
-            s.meta.ids.push(id);
-            s.meta.survey.push(0);
-            s.meta.frozen.push(false);
+            s.meta.push(id, 0);
             id += 1;
         }
     }

@@ -37,9 +37,7 @@ fn tiny_splats() -> Splats {
         s.rotations.push(Quat::IDENTITY);
         s.raw_opacities.push(0.5);
         s.sh.extend_from_slice(&[0.1, 0.2, 0.3]);
-        s.meta.ids.push(i);
-        s.meta.survey.push(0);
-        s.meta.frozen.push(false);
+        s.meta.push(i, 0);
     }
     s.check_lengths().expect("consistent test model");
     s

@@ -61,7 +61,8 @@ fn layout(bytes: &[u8]) -> (usize, usize) {
         .position(|w| w == b"end_header\n")
         .unwrap()
         + 11;
-    (end, 4 * (14 + 12 + 3 + 1) + 8)
+    // 3DGS floats (degree 1), 3 labels, survey; the double id; float damage_survey, uchar state.
+    (end, 4 * (14 + 12 + 3 + 1) + 8 + 4 + 1)
 }
 
 #[test]

@@ -34,6 +34,13 @@ fn splats(sh_degree: u32, label_channels: usize, n: usize, seed: u64) -> Splats 
             (g as u64) * 1_000_003 + (1 << 40),
             (g % 7) as u16,
         );
+        // History and state bits travel too (every third Gaussian never damage).
+        s.meta.damage_survey[g] = if g % 3 == 0 {
+            damage_twin::splats::model::NO_SURVEY
+        } else {
+            (g % 5) as u16
+        };
+        s.meta.state[g] = (g % 32) as u8;
     }
     s
 }
@@ -66,10 +73,11 @@ fn splats_round_trip_bitwise_for_every_sh_degree_with_and_without_labels() {
             write_splats(&path, &original).unwrap();
             let read = read_splats(&path).unwrap();
             assert_bitwise_equal(&original, &read);
-            // Size: header + N × (4 bytes × (14 + 3K + labels + survey) + 8 bytes id).
+            // Size: header + N × (4 bytes × (14 + 3K + labels + survey) + 8 bytes id + 4 bytes
+            // damage_survey + 1 byte state).
             let k = (degree + 1) * (degree + 1);
             let header_len = header_of(&path).len();
-            let row = 4 * (14 + 3 * k as usize + labels + 1) + 8;
+            let row = 4 * (14 + 3 * k as usize + labels + 1) + 8 + 4 + 1;
             assert_eq!(
                 std::fs::metadata(&path).unwrap().len() as usize,
                 header_len + 57 * row
@@ -130,11 +138,12 @@ fn standard_fields_match_the_original_3dgs_layout() {
     assert_eq!(
         &header[standard.len()..],
         "property float label_crack\nproperty float label_spalling\nproperty float label_rebar\n\
-         property float survey\nproperty double id\nend_header\n"
+         property float survey\nproperty double id\nproperty float damage_survey\n\
+         property uchar state\nend_header\n"
     );
     // Values of Gaussian 2 straight from the bytes, in 3DGS's order.
     let bytes = std::fs::read(&path).unwrap();
-    let row_len = 4 * (14 + 48 + 3 + 1) + 8;
+    let row_len = 4 * (14 + 48 + 3 + 1) + 8 + 4 + 1;
     let row = &bytes[header.len() + 2 * row_len..header.len() + 3 * row_len];
     let f = |i: usize| f32::from_le_bytes(row[4 * i..4 * i + 4].try_into().unwrap());
     assert_eq!(f(0).to_bits(), s.means[2].x.to_bits());
@@ -163,6 +172,9 @@ fn standard_fields_match_the_original_3dgs_layout() {
     assert_eq!(f(65), 2.0, "survey");
     let id = f64::from_le_bytes(row[4 * 66..4 * 66 + 8].try_into().unwrap());
     assert_eq!(id as u64, s.meta.ids[2]);
+    let damage_survey = f32::from_le_bytes(row[4 * 66 + 8..4 * 66 + 12].try_into().unwrap());
+    assert_eq!(damage_survey, f32::from(s.meta.damage_survey[2]));
+    assert_eq!(row[4 * 66 + 12], s.meta.state[2], "state");
 }
 
 /// A degree-1 file as another tool might write it: ASCII, properties in another order, no

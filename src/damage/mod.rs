@@ -6,11 +6,14 @@ pub mod assess;
 pub mod bench;
 pub mod display;
 pub mod evaluate;
+pub mod hulls;
 pub mod layer;
+pub mod lift;
 pub mod mode;
 pub mod overlay;
 pub mod palette;
 pub mod reference;
+pub mod select;
 pub mod setup;
 
 // The classes live beneath `scene` (mask folders and PLY properties are named by them).

@@ -53,6 +53,23 @@ impl Camera {
         }
     }
 
+    /// The same camera seeing only the window `width × height` whose top-left pixel is
+    /// `(x0, y0)`: the principal point moves with the window, so every pixel of the crop sees
+    /// exactly what the same pixel of the full image sees (refinement renders only a hull's box).
+    pub fn cropped(&self, x0: u32, y0: u32, width: u32, height: u32) -> Camera {
+        let k = self.intrinsics;
+        Camera {
+            intrinsics: Intrinsics {
+                width,
+                height,
+                cx: k.cx - x0 as f32,
+                cy: k.cy - y0 as f32,
+                ..k
+            },
+            ..*self
+        }
+    }
+
     /// World-to-camera rotation matrix.
     pub fn rotation_matrix(&self) -> Mat3 {
         Mat3::from_quat(self.rotation)

@@ -36,6 +36,22 @@ impl RgbImage {
     }
 
     /// Converts to 8-bit sRGB for saving (values clamped to `[0, 1]`).
+    /// The window `width × height` at `(x0, y0)`, which must lie inside the image.
+    pub fn crop(&self, x0: u32, y0: u32, width: u32, height: u32) -> RgbImage {
+        debug_assert!(x0 + width <= self.width && y0 + height <= self.height);
+        let row = self.width as usize * 3;
+        let mut data = Vec::with_capacity(width as usize * height as usize * 3);
+        for y in y0..y0 + height {
+            let start = y as usize * row + x0 as usize * 3;
+            data.extend_from_slice(&self.data[start..start + width as usize * 3]);
+        }
+        RgbImage {
+            width,
+            height,
+            data,
+        }
+    }
+
     pub fn to_rgb8(&self) -> image::RgbImage {
         let bytes = self
             .data
@@ -75,6 +91,21 @@ impl Mask {
 
     pub fn get(&self, x: u32, y: u32) -> bool {
         self.data[y as usize * self.width as usize + x as usize] != 0
+    }
+
+    /// The window `width × height` at `(x0, y0)`, which must lie inside the mask.
+    pub fn crop(&self, x0: u32, y0: u32, width: u32, height: u32) -> Mask {
+        debug_assert!(x0 + width <= self.width && y0 + height <= self.height);
+        let mut data = Vec::with_capacity(width as usize * height as usize);
+        for y in y0..y0 + height {
+            let start = y as usize * self.width as usize + x0 as usize;
+            data.extend_from_slice(&self.data[start..start + width as usize]);
+        }
+        Mask {
+            width,
+            height,
+            data,
+        }
     }
 
     pub fn count(&self) -> usize {

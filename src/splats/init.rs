@@ -188,6 +188,8 @@ pub fn from_points(
     splats.meta = SplatMeta {
         ids: (opts.first_id..opts.first_id + n as u64).collect(),
         survey: vec![opts.survey; n],
+        damage_survey: vec![crate::splats::model::NO_SURVEY; n],
+        state: vec![0; n],
         frozen: vec![false; n],
     };
     Ok(splats)

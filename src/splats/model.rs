@@ -2,15 +2,50 @@
 
 use glam::{Quat, Vec3};
 
+/// The bits of `SplatMeta::state` (DESIGN.md: one byte per Gaussian, saved as the `uchar state`
+/// PLY property). Selection and edits are bit operations, so undo is their inverse.
+pub mod state {
+    pub const SELECTED: u8 = 1;
+    pub const HIDDEN: u8 = 2;
+    pub const LOCKED: u8 = 4;
+    /// Soft deletion: kept in the file, never rendered or trained.
+    pub const DELETED: u8 = 8;
+    /// Trained by a hierarchical refinement (fine where the damage is).
+    pub const REFINED: u8 = 16;
+}
+
+/// `SplatMeta::damage_survey` of a Gaussian never seen as damage.
+pub const NO_SURVEY: u16 = u16::MAX;
+
 /// Per-Gaussian bookkeeping, kept beside (not inside) the trainable parameters.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SplatMeta {
     /// Stable identity across densification, saves and surveys.
     pub ids: Vec<u64>,
-    /// Survey index in which the Gaussian first appeared.
+    /// Survey index in which the Gaussian appeared or last changed.
     pub survey: Vec<u16>,
-    /// Frozen Gaussians are rendered but never updated.
+    /// Survey index in which the Gaussian was first seen as damage (`NO_SURVEY`: never).
+    pub damage_survey: Vec<u16>,
+    /// `state` bits (selected, hidden, locked, deleted, refined).
+    pub state: Vec<u8>,
+    /// Frozen Gaussians are rendered but never updated (a run's setting, not saved).
     pub frozen: Vec<bool>,
+}
+
+impl SplatMeta {
+    /// Appends the bookkeeping of a new Gaussian: no state, never damage, not frozen.
+    pub fn push(&mut self, id: u64, survey: u16) {
+        self.ids.push(id);
+        self.survey.push(survey);
+        self.damage_survey.push(NO_SURVEY);
+        self.state.push(0);
+        self.frozen.push(false);
+    }
+
+    /// Whether Gaussian `g` has every bit of `bits` set.
+    pub fn has(&self, g: usize, bits: u8) -> bool {
+        self.state[g] & bits == bits
+    }
 }
 
 /// Gaussians as structure of arrays. Quaternions are glam's (x, y, z, w) in memory; PLY and
@@ -110,9 +145,7 @@ impl Splats {
         self.raw_opacities.push(raw_opacity);
         self.sh.extend_from_slice(sh);
         self.raw_labels.extend_from_slice(labels);
-        self.meta.ids.push(id);
-        self.meta.survey.push(survey);
-        self.meta.frozen.push(false);
+        self.meta.push(id, survey);
     }
 
     /// Keeps only the Gaussians where `keep[g]` is true, preserving order.
@@ -137,6 +170,8 @@ impl Splats {
         filter(&mut self.raw_labels, keep, self.label_channels);
         filter(&mut self.meta.ids, keep, 1);
         filter(&mut self.meta.survey, keep, 1);
+        filter(&mut self.meta.damage_survey, keep, 1);
+        filter(&mut self.meta.state, keep, 1);
         filter(&mut self.meta.frozen, keep, 1);
     }
 
@@ -175,6 +210,8 @@ impl Splats {
             ("raw_labels", self.raw_labels.len(), n * self.label_channels),
             ("meta.ids", self.meta.ids.len(), n),
             ("meta.survey", self.meta.survey.len(), n),
+            ("meta.damage_survey", self.meta.damage_survey.len(), n),
+            ("meta.state", self.meta.state.len(), n),
             ("meta.frozen", self.meta.frozen.len(), n),
         ];
         for (name, got, want) in checks {

@@ -263,6 +263,11 @@ impl Densifier {
             labels.copy_from_slice(s.labels_of(g));
             let (rot, op, survey) = (s.rotations[g], s.raw_opacities[g], s.meta.survey[g]);
             s.push(mean, log_scale, rot, op, &sh, &labels, id, survey);
+            // A child keeps its parent's history and state (a refined crack's children are
+            // refined crack too).
+            let child = s.len() - 1;
+            s.meta.damage_survey[child] = s.meta.damage_survey[g];
+            s.meta.state[child] = s.meta.state[g];
         };
         // Clones: exact copies appended in index order (3DGS `densify_and_clone`).
         let mut cloned = 0;

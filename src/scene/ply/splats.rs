@@ -11,7 +11,7 @@ use super::header::RowReader;
 use crate::scene::DamageClass;
 use crate::scene::SceneError;
 use crate::scene::atomic::write_atomic;
-use crate::splats::model::sh_coeffs_for_degree;
+use crate::splats::model::{NO_SURVEY, sh_coeffs_for_degree};
 use crate::splats::{MAX_LABEL_CHANNELS, Splats};
 
 /// Largest id stored exactly in the `double id` property (2^53).
@@ -38,7 +38,9 @@ pub fn standard_properties(sh_degree: u32) -> Vec<String> {
 }
 
 /// The header damage-twin writes: the 3DGS header (all `float`), then `label_*` floats when the
-/// model has label channels, then `float survey` and `double id`.
+/// model has label channels, then `float survey`, `double id`, `float damage_survey` (the
+/// survey a Gaussian was first seen as damage, 65535 for never) and `uchar state` (DESIGN.md's
+/// selection and edit bits).
 pub fn splat_header(splats: &Splats) -> String {
     let mut header = format!(
         "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
@@ -50,7 +52,10 @@ pub fn splat_header(splats: &Splats) -> String {
     for k in 0..splats.label_channels {
         header.push_str(&format!("property float {}\n", label_property(k)));
     }
-    header.push_str("property float survey\nproperty double id\nend_header\n");
+    header.push_str(
+        "property float survey\nproperty double id\nproperty float damage_survey\n\
+         property uchar state\nend_header\n",
+    );
     header
 }
 
@@ -98,6 +103,8 @@ pub fn write_splats(path: &Path, splats: &Splats) -> Result<(), SceneError> {
             splats.labels_of(g).iter().for_each(|&v| put(v));
             put(f32::from(splats.meta.survey[g]));
             row.extend_from_slice(&(splats.meta.ids[g] as f64).to_le_bytes());
+            row.extend_from_slice(&f32::from(splats.meta.damage_survey[g]).to_le_bytes());
+            row.push(splats.meta.state[g]);
             w.write_all(&row)?;
         }
         Ok(())
@@ -105,8 +112,8 @@ pub fn write_splats(path: &Path, splats: &Splats) -> Result<(), SceneError> {
 }
 
 /// Reads a 3DGS PLY (binary either endianness or ASCII; any property order; any numeric type).
-/// SH degree follows the `f_rest_*` count; labels, survey and id are optional (ids default to
-/// the vertex index, surveys to 0). Refuses missing properties, NaN/Inf, an all-zero rotation,
+/// SH degree follows the `f_rest_*` count; labels, survey, id, damage_survey and state are
+/// optional (ids default to the vertex index, surveys to 0, damage_survey to never, state to 0). Refuses missing properties, NaN/Inf, an all-zero rotation,
 /// bad counts and truncated data.
 pub fn read_splats(path: &Path) -> Result<Splats, SceneError> {
     let (header, mut rows) = RowReader::open(path, "vertex")?;
@@ -165,6 +172,8 @@ pub fn read_splats(path: &Path) -> Result<Splats, SceneError> {
     }
     let survey = vertex.find("survey");
     let id = vertex.find("id");
+    let damage_survey = vertex.find("damage_survey");
+    let state = vertex.find("state");
 
     let n = rows.count;
     let k = sh_coeffs_for_degree(sh_degree);
@@ -177,6 +186,8 @@ pub fn read_splats(path: &Path) -> Result<Splats, SceneError> {
     splats.raw_labels.reserve_exact(n * label_props.len());
     splats.meta.ids.reserve_exact(n);
     splats.meta.survey.reserve_exact(n);
+    splats.meta.damage_survey.reserve_exact(n);
+    splats.meta.state.reserve_exact(n);
     splats.meta.frozen.reserve_exact(n);
 
     let names = &vertex.properties;
@@ -214,18 +225,21 @@ pub fn read_splats(path: &Path) -> Result<Splats, SceneError> {
         for (slot, &i) in labels.iter_mut().zip(&label_props) {
             *slot = get(i)?;
         }
-        let survey = match survey {
-            Some(i) => {
-                let v = values[i];
-                if !(v >= 0.0 && v <= f64::from(u16::MAX) && v.fract() == 0.0) {
-                    return Err(bad(format!(
-                        "vertex {g}: survey {v} is not an integer 0..65535"
-                    )));
-                }
-                v as u16
+        let small_int = |index: Option<usize>, what: &str, max: u16, default: u16| {
+            let Some(i) = index else {
+                return Ok(default);
+            };
+            let v = values[i];
+            if !(v >= 0.0 && v <= f64::from(max) && v.fract() == 0.0) {
+                return Err(bad(format!(
+                    "vertex {g}: {what} {v} is not an integer 0..{max}"
+                )));
             }
-            None => 0,
+            Ok(v as u16)
         };
+        let survey = small_int(survey, "survey", u16::MAX, 0)?;
+        let first_damage = small_int(damage_survey, "damage_survey", u16::MAX, NO_SURVEY)?;
+        let bits = small_int(state, "state", u16::from(u8::MAX), 0)? as u8;
         let id = match id {
             Some(i) => {
                 let v = values[i];
@@ -246,6 +260,8 @@ pub fn read_splats(path: &Path) -> Result<Splats, SceneError> {
             id,
             survey,
         );
+        splats.meta.damage_survey[g] = first_damage;
+        splats.meta.state[g] = bits;
         g += 1;
     }
     Ok(splats)
