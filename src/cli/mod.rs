@@ -8,6 +8,7 @@ mod demo;
 mod eval;
 mod inspect;
 mod launch;
+mod refine;
 mod render;
 mod study;
 mod synth;
@@ -38,6 +39,9 @@ enum Command {
     Train(train::Args),
     /// PSNR and SSIM of a model on a dataset's held-out views.
     Eval(eval::Args),
+    /// Hierarchical refinement: select a twin's damage Gaussians, draw hull masks, refine them at
+    /// high resolution with the rest frozen.
+    Refine(refine::Args),
     /// Render one view of a model to a PNG.
     Render(render::Args),
     /// Time per training iteration by stage, memory and bytes per Gaussian (JSON).
@@ -63,6 +67,7 @@ pub fn main() -> ExitCode {
         Some(Command::Synth(args)) => synth::run(args),
         Some(Command::Train(args)) => train::run(args),
         Some(Command::Eval(args)) => eval::run(args),
+        Some(Command::Refine(args)) => refine::run(args),
         Some(Command::Render(args)) => render::run(args),
         Some(Command::Bench(args)) => bench::run(args),
         Some(Command::BenchRender(args)) => bench_render::run(args),

@@ -74,6 +74,11 @@ impl WeightLift {
         &self.rasterizer.screen_grads().v_labels
     }
 
+    /// The last view's projection (2D means, conics, radii per Gaussian).
+    pub fn projected(&self) -> &crate::raster::Projected {
+        self.rasterizer.projected()
+    }
+
     /// The last view's forward (colour, alpha, depth; labels are meaningless).
     pub fn render(&self) -> &RenderOutput {
         &self.out

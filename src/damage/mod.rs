@@ -13,6 +13,7 @@ pub mod mode;
 pub mod overlay;
 pub mod palette;
 pub mod reference;
+pub mod refine;
 pub mod select;
 pub mod setup;
 

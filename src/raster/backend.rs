@@ -33,6 +33,13 @@ pub trait RasterBackend: Send {
         grads: &mut SplatGrads,
     );
 
+    /// Renders only these tiles in the next frames (None: all); see
+    /// `Rasterizer::set_active_tiles`. Rendering every tile is always correct, only slower, so
+    /// a backend may ignore this.
+    fn set_active_tiles(&mut self, tiles: Option<&[bool]>) {
+        let _ = tiles;
+    }
+
     /// Per Gaussian, the screen radius of the last forward (0: culled); density control
     /// reads it.
     fn radii(&self) -> &[u32];
@@ -65,6 +72,10 @@ impl RasterBackend for Rasterizer {
         grads: &mut SplatGrads,
     ) {
         self.backward_pixels(splats, camera, settings, v_out, grads);
+    }
+
+    fn set_active_tiles(&mut self, tiles: Option<&[bool]>) {
+        Rasterizer::set_active_tiles(self, tiles);
     }
 
     fn radii(&self) -> &[u32] {

@@ -137,6 +137,9 @@ pub(crate) struct TileBins {
     /// Tile rectangle per Gaussian (indexed by Gaussian).
     rects: Vec<[u32; 4]>,
     cursor: Vec<u32>,
+    /// Per tile: rendered or not (None: every tile). Set by `Rasterizer::set_active_tiles`;
+    /// applied only when it has one entry per tile of the frame.
+    pub active: Option<Vec<bool>>,
 }
 
 impl TileBins {
@@ -200,6 +203,16 @@ impl TileBins {
         {
             *rect = tile_rect_in::<F>(mean2d, radius, extent, width, height);
         }
+        // Tiles left out (a refinement renders only the tiles its hulls touch) get no
+        // intersections: they render as background and their backward does nothing.
+        let active = self.active.as_deref().filter(|a| a.len() == tiles);
+        if let Some(active) = active {
+            for rect in &mut self.rects {
+                if rect[2] > rect[0] && !rect_touches(rect, active, tiles_x) {
+                    *rect = [0; 4];
+                }
+            }
+        }
         for g in 0..n {
             let rect = self.rects[g];
             if rect[2] > rect[0] {
@@ -209,7 +222,10 @@ impl TileBins {
                 self.depth_keys.push(key);
                 for ty in rect[1] as usize..rect[3] as usize {
                     for tx in rect[0] as usize..rect[2] as usize {
-                        self.cursor[ty * tiles_x + tx] += 1;
+                        let tile = ty * tiles_x + tx;
+                        if active.is_none_or(|a| a[tile]) {
+                            self.cursor[tile] += 1;
+                        }
                     }
                 }
             }
@@ -229,13 +245,25 @@ impl TileBins {
             let rect = self.rects[g as usize];
             for ty in rect[1] as usize..rect[3] as usize {
                 for tx in rect[0] as usize..rect[2] as usize {
-                    let slot = &mut self.cursor[ty * tiles_x + tx];
-                    self.gaussian_ids[*slot as usize] = g;
-                    *slot += 1;
+                    let tile = ty * tiles_x + tx;
+                    if active.is_none_or(|a| a[tile]) {
+                        let slot = &mut self.cursor[tile];
+                        self.gaussian_ids[*slot as usize] = g;
+                        *slot += 1;
+                    }
                 }
             }
         }
     }
+}
+
+/// Whether the tile rectangle `[x0, y0, x1, y1]` holds an active tile.
+fn rect_touches(rect: &[u32; 4], active: &[bool], tiles_x: usize) -> bool {
+    (rect[1] as usize..rect[3] as usize).any(|ty| {
+        active[ty * tiles_x + rect[0] as usize..ty * tiles_x + rect[2] as usize]
+            .iter()
+            .any(|&a| a)
+    })
 }
 
 #[cfg(test)]

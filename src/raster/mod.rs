@@ -319,6 +319,21 @@ impl Rasterizer {
         self.timings.raster_forward = t3 - t2;
     }
 
+    /// Renders only these tiles (`ty * tiles_x + tx`, one flag per tile of the next frames;
+    /// None: all). The others come out as background and take no part in the backward: a
+    /// refinement whose loss lives inside hull masks pays only for the tiles they touch. A mask
+    /// of the wrong length for a frame is ignored.
+    pub fn set_active_tiles(&mut self, tiles: Option<&[bool]>) {
+        match tiles {
+            Some(t) => {
+                let active = self.bins.active.get_or_insert_with(Vec::new);
+                active.clear();
+                active.extend_from_slice(t);
+            }
+            None => self.bins.active = None,
+        }
+    }
+
     pub fn projected(&self) -> &Projected {
         &self.projected
     }

@@ -271,6 +271,16 @@ impl Dataset {
         Ok((Camera::resized(&camera, width, height), masks))
     }
 
+    /// View `index`'s camera at `scale`, as `load_view` would give it, from the image's header
+    /// alone (no pixels, no masks).
+    pub fn view_camera(&self, index: usize, scale: ImageScale) -> Result<Camera, SceneError> {
+        let view = self.view(index)?;
+        let stored = crate::scene::files::image_size(&view.image_path)?;
+        let (camera, _) = stored_geometry(view, stored)?;
+        let (width, height) = loaded_size(view, scale, stored)?;
+        Ok(Camera::resized(&camera, width, height))
+    }
+
     fn view(&self, index: usize) -> Result<&View, SceneError> {
         self.views.get(index).ok_or_else(|| {
             SceneError::invalid(

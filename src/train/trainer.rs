@@ -11,6 +11,7 @@ use serde::Serialize;
 use crate::raster::{
     PixelGrads, RasterBackend, Rasterizer, RenderOutput, RenderSettings, SplatGrads,
 };
+use crate::scene::Mask;
 use crate::splats::{MAX_LABEL_CHANNELS, Splats};
 use crate::train::adam::{Adam, GroupFlags, LearningRates, ParamGrads};
 use crate::train::densify::{Densifier, camera_extent};
@@ -118,6 +119,8 @@ pub struct Trainer {
     views: Vec<TrainView>,
     /// Loss region per view as weights (0/1), converted once.
     regions: Vec<Option<Vec<f32>>>,
+    /// Per view with a loss region, the tiles that region needs rendered (see `region_tiles`).
+    tiles: Vec<Option<Vec<bool>>>,
     /// The renderer (the CPU rasterizer unless `with_backend` chose another).
     rasterizer: Box<dyn RasterBackend>,
     out: RenderOutput,
@@ -231,6 +234,10 @@ impl Trainer {
                 })
             })
             .collect();
+        let tiles = views
+            .iter()
+            .map(|v| v.region.as_ref().map(region_tiles))
+            .collect();
         let grads = SplatGrads::zeros(&splats);
         let checkpoint = Checkpoint {
             splats: splats.clone(),
@@ -240,6 +247,7 @@ impl Trainer {
         let rng = fastrand::Rng::with_seed(spec.seed);
         Ok(Trainer {
             regions,
+            tiles,
             rasterizer: backend,
             out: RenderOutput::default(),
             grads,
@@ -355,8 +363,10 @@ impl Trainer {
             ),
         );
 
-        // Forward.
+        // Forward, of the tiles the view's loss region needs.
         let t = Instant::now();
+        self.rasterizer
+            .set_active_tiles(self.tiles[view_index].as_deref());
         self.rasterizer
             .forward(&self.splats, &view.camera, &settings, &mut self.out);
         self.timings.forward += t.elapsed().as_secs_f64();
@@ -531,6 +541,7 @@ impl Trainer {
 
     /// Mean PSNR and SSIM of the current model over `views`, at the current SH degree.
     pub fn evaluate(&mut self, views: &[TrainView]) -> EvalScores {
+        self.rasterizer.set_active_tiles(None);
         let settings = RenderSettings::new(self.spec.background, self.active_sh_degree());
         evaluate_with(
             self.rasterizer.as_mut(),
@@ -548,6 +559,46 @@ impl Trainer {
         let k3 = self.splats.sh_coeffs() * 3;
         self.splats.sh[gaussian * k3] = f32::NAN;
     }
+}
+
+/// The tiles a loss region needs rendered: every tile within the SSIM window's half width
+/// (5 px for its 11×11 window) of a region pixel. The loss's value and gradient at region pixels
+/// read no pixel beyond that, and its gradient reaches none, so leaving the other tiles out
+/// changes nothing that is trained.
+fn region_tiles(region: &Mask) -> Vec<bool> {
+    const REACH: u32 = 5;
+    let ts = crate::raster::TILE_SIZE;
+    let (tiles_x, tiles_y) = crate::raster::tile_grid(region.width, region.height);
+    let mut tiles = vec![false; tiles_x as usize * tiles_y as usize];
+    for y in 0..region.height {
+        let row = &region.data[(y * region.width) as usize..((y + 1) * region.width) as usize];
+        let (ty0, ty1) = (
+            y.saturating_sub(REACH) / ts,
+            (y + REACH).min(region.height - 1) / ts,
+        );
+        // Each run of region pixels in the row, widened by the reach.
+        let mut x = 0;
+        while x < region.width {
+            if row[x as usize] == 0 {
+                x += 1;
+                continue;
+            }
+            let start = x;
+            while x < region.width && row[x as usize] != 0 {
+                x += 1;
+            }
+            let (tx0, tx1) = (
+                start.saturating_sub(REACH) / ts,
+                (x - 1 + REACH).min(region.width - 1) / ts,
+            );
+            for ty in ty0..=ty1 {
+                for tx in tx0..=tx1 {
+                    tiles[(ty * tiles_x + tx) as usize] = true;
+                }
+            }
+        }
+    }
+    tiles
 }
 
 fn check_view(view: &TrainView, label_channels: usize) -> Result<(), TrainError> {
