@@ -296,6 +296,7 @@ fn bad_project_files_are_errors_not_panics() {
             dataset: "s1".into(),
             model: None,
             metrics: None,
+            ..Default::default()
         })
         .unwrap();
     project.save(&path).unwrap();

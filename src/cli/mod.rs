@@ -13,6 +13,7 @@ mod render;
 mod study;
 mod synth;
 mod train;
+mod twin;
 
 use std::process::ExitCode;
 
@@ -51,6 +52,9 @@ enum Command {
     /// Studies that measure the twin (mask-noise: how much segmentation error it removes).
     #[command(subcommand)]
     Study(study::Study),
+    /// The survey timeline of a twin project: new, add-survey, detect, update, status.
+    #[command(subcommand)]
+    Twin(twin::Twin),
     /// The built-in demo building: the app, or with --headless synth + train + eval + charts.
     Demo(demo::Args),
 }
@@ -72,6 +76,7 @@ pub fn main() -> ExitCode {
         Some(Command::Bench(args)) => bench::run(args),
         Some(Command::BenchRender(args)) => bench_render::run(args),
         Some(Command::Study(study)) => study::run(study),
+        Some(Command::Twin(command)) => twin::run(command),
         Some(Command::Demo(args)) => demo::run(args),
     };
     match result {

@@ -6,6 +6,7 @@ pub mod assess;
 pub mod bench;
 pub mod display;
 pub mod evaluate;
+pub mod hierarchy;
 pub mod hulls;
 pub mod layer;
 pub mod lift;

@@ -21,6 +21,7 @@ use crate::damage::select::{MaskView, SelectConfig, Selection, select};
 use crate::damage::setup::apply_mode;
 use crate::damage::{DamageClass, TrainMode};
 use crate::raster::{RenderSettings, render};
+use crate::scene::project::ColourTransform;
 use crate::scene::{Dataset, ImageScale, Mask};
 use crate::splats::Splats;
 use crate::splats::model::state;
@@ -79,6 +80,10 @@ pub struct RefineConfig {
     pub label_weight: f32,
     pub label_pos_weight: f32,
     pub label_lr: Option<f32>,
+    /// Per view index, how its photo's light differs from the twin's: the photos are mapped
+    /// into the twin's look before training and scoring (a later survey's light must not
+    /// repaint the twin).
+    pub appearance: BTreeMap<usize, ColourTransform>,
 }
 
 impl Default for RefineConfig {
@@ -97,8 +102,13 @@ impl Default for RefineConfig {
             crop_margin_px: 8,
             region_spacings: 6.0,
             label_weight: run.label_weight,
-            label_pos_weight: run.label_pos_weight,
+            // Measured on the demo building (docs/DAMAGE.md, retrain 1000 steps at 960×540):
+            // the coarse run's 4 leaves cracks too wide at full resolution (precision 0.72 against
+            // recall 0.95, IoU 0.69); 2 balances them (0.80 / 0.89, IoU 0.73) and 1 loses rebar
+            // recall (0.53).
+            label_pos_weight: 2.0,
             label_lr: run.label_lr,
+            appearance: BTreeMap::new(),
         }
     }
 }
@@ -336,6 +346,7 @@ pub fn refine(
         .par_iter()
         .map(|v| {
             let mut loaded = load_views(dataset, &[v.index], config.scale, mode.uses_masks())?;
+            to_twin_look(&mut loaded, &[v.index], config);
             apply_mode(&mut loaded, mode, &config.select.palette);
             let full = loaded.pop().expect("one view loaded");
             Ok(hull_view(&full, &v.hulls, config.crop_margin_px))
@@ -525,6 +536,7 @@ fn full_step_ms(
     const STEPS: u32 = 8;
     let indices: Vec<usize> = trained.iter().take(4).map(|v| v.index).collect();
     let mut views = load_views(dataset, &indices, config.scale, mode.uses_masks())?;
+    to_twin_look(&mut views, &indices, config);
     apply_mode(&mut views, mode, &config.select.palette);
     let timing_spec = TrainSpec {
         iterations: STEPS,
@@ -539,6 +551,15 @@ fn full_step_ms(
         trainer.step();
     }
     Ok(t.elapsed().as_secs_f64() * 1000.0 / (STEPS - 1) as f64)
+}
+
+/// Maps the photos of `views` (dataset indices `indices`) into the twin's light.
+fn to_twin_look(views: &mut [TrainView], indices: &[usize], config: &RefineConfig) {
+    for (view, index) in views.iter_mut().zip(indices) {
+        if let Some(transform) = config.appearance.get(index) {
+            transform.undo(&mut view.image);
+        }
+    }
 }
 
 /// Gaussians the refinement trained (the selection) or created, marked `REFINED`.
@@ -578,7 +599,8 @@ fn quality(
         q.precision = figures.precision;
         q.recall = figures.recall;
     }
-    let photos = load_views(dataset, &indices, config.scale, false)?;
+    let mut photos = load_views(dataset, &indices, config.scale, false)?;
+    to_twin_look(&mut photos, &indices, config);
     let settings = RenderSettings::new(config.background, splats.sh_degree);
     let (mut se_out, mut n_out, mut se_all, mut n_all) = (0.0f64, 0usize, 0.0f64, 0usize);
     for (photo, v) in photos.iter().zip(heldout) {

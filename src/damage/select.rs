@@ -62,6 +62,10 @@ pub struct SelectConfig {
     pub vote_fraction: f32,
     /// Neighbours added per kept Gaussian.
     pub min_neighbours: usize,
+    /// Also offer every Gaussian the filter does not pass to the lift, for whichever class's
+    /// mask pixels hold the majority of its weight: a survey update selects new damage this way,
+    /// where the twin's labels know nothing of it yet (needs `Validation::Lift`).
+    pub lift_unlabelled: bool,
 }
 
 impl Default for SelectConfig {
@@ -75,6 +79,7 @@ impl Default for SelectConfig {
             validation: Validation::Lift,
             vote_fraction: 0.5,
             min_neighbours: 8,
+            lift_unlabelled: false,
         }
     }
 }
@@ -165,15 +170,29 @@ pub fn select(
 ) -> Selection {
     let mut selection = Selection::default();
     let t = Instant::now();
-    let candidates: Vec<(u32, DamageClass)> = (0..splats.len())
+    let filtered: Vec<(u32, DamageClass)> = (0..splats.len())
         .filter_map(|g| candidate_class(splats, g, config).map(|c| (g as u32, c)))
         .collect();
-    selection.filtered = candidates.iter().map(|&(g, _)| g).collect();
+    selection.filtered = filtered.iter().map(|&(g, _)| g).collect();
+    let lift_all = config.lift_unlabelled && config.validation == Validation::Lift;
+    let candidates: Vec<(u32, Option<DamageClass>)> = if lift_all {
+        let mut class_of = vec![None; splats.len()];
+        for &(g, c) in &filtered {
+            class_of[g as usize] = Some(c);
+        }
+        class_of
+            .into_iter()
+            .enumerate()
+            .map(|(g, c)| (g as u32, c))
+            .collect()
+    } else {
+        filtered.iter().map(|&(g, c)| (g, Some(c))).collect()
+    };
     selection.seconds.filter = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
     let kept: Vec<(u32, DamageClass)> = match config.validation {
-        Validation::None => candidates,
+        Validation::None => filtered,
         Validation::Vote | Validation::Lift => {
             validate(splats, views, &candidates, config, background, on_view)
         }
@@ -192,7 +211,7 @@ pub fn select(
 fn validate(
     splats: &Splats,
     views: &[MaskView],
-    candidates: &[(u32, DamageClass)],
+    candidates: &[(u32, Option<DamageClass>)],
     config: &SelectConfig,
     background: glam::Vec3,
     on_view: &mut dyn FnMut(usize, usize),
@@ -204,6 +223,7 @@ fn validate(
     let mut lift = WeightLift::new(splats, channels, settings);
     // Per candidate: Σ weight per class and in total (lift); views seen and views inside (vote).
     let mut weight = vec![[0.0f64; 4]; candidates.len()];
+    let all = classes;
     let mut seen = vec![0u32; candidates.len()];
     let mut inside = vec![0u32; candidates.len()];
     for (done, view) in views.iter().enumerate() {
@@ -222,8 +242,13 @@ fn validate(
         });
         for (i, &(g, class)) in candidates.iter().enumerate() {
             let w = &per_gaussian[g as usize * channels..(g as usize + 1) * channels];
-            weight[i][0] += f64::from(w[class.channel()]);
-            weight[i][1] += f64::from(w[classes]);
+            for c in 0..classes {
+                weight[i][c] += f64::from(w[c]);
+            }
+            weight[i][all] += f64::from(w[classes]);
+            let Some(class) = class else {
+                continue;
+            };
             // Visible: it draws at least a tenth of a pixel's worth in this view.
             if w[classes] > 0.1 {
                 seen[i] += 1;
@@ -243,17 +268,27 @@ fn validate(
         }
         on_view(done + 1, views.len());
     }
+    let wanted = |c: DamageClass| config.classes.contains(&c);
     candidates
         .iter()
         .enumerate()
-        .filter(|&(i, _)| match config.validation {
-            Validation::Lift => weight[i][0] > 0.5 * weight[i][1],
-            Validation::Vote => {
-                seen[i] > 0 && inside[i] as f32 >= config.vote_fraction * seen[i] as f32
-            }
-            Validation::None => true,
+        .filter_map(|(i, &(g, class))| {
+            // An unlabelled candidate stands for the class holding most of its weight.
+            let class = class.or_else(|| {
+                DamageClass::ALL
+                    .into_iter()
+                    .filter(|&c| wanted(c))
+                    .max_by(|a, b| weight[i][a.channel()].total_cmp(&weight[i][b.channel()]))
+            })?;
+            let keep = match config.validation {
+                Validation::Lift => weight[i][class.channel()] > 0.5 * weight[i][all],
+                Validation::Vote => {
+                    seen[i] > 0 && inside[i] as f32 >= config.vote_fraction * seen[i] as f32
+                }
+                Validation::None => true,
+            };
+            keep.then_some((g, class))
         })
-        .map(|(_, &c)| c)
         .collect()
 }
 
@@ -385,6 +420,30 @@ mod tests {
             };
             assert!(r >= min_recall, "{validation:?}: recall {r}");
         }
+    }
+
+    #[test]
+    fn unlabelled_damage_is_lifted_from_the_masks_alone() {
+        // A twin that knows nothing of the damage (every label low): the masks alone select it,
+        // as a survey update selects new damage.
+        let (mut splats, truth, views) = wall(0);
+        splats.raw_labels.iter_mut().for_each(|l| *l = -4.0);
+        let config = SelectConfig {
+            lift_unlabelled: true,
+            min_neighbours: 0,
+            ..SelectConfig::default()
+        };
+        let selection = select(&splats, &views, &config, Vec3::ZERO, &mut |_, _| {});
+        assert!(selection.filtered.is_empty());
+        let (p, r) = precision_recall(&selection.validated, &truth);
+        // Measured 1.0 / 1.0 (the rendered masks are the truth's).
+        assert!(p >= 0.95 && r >= 0.95, "{p} {r}");
+        assert!(
+            selection
+                .validated_class
+                .iter()
+                .all(|&c| c == DamageClass::Crack)
+        );
     }
 
     #[test]

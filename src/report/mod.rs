@@ -2,6 +2,7 @@
 //! arrives computed; nothing here renders a model or trains.
 
 pub mod study_chart;
+pub mod tradeoff_chart;
 pub mod training_chart;
 
 use std::path::{Path, PathBuf};

@@ -13,7 +13,9 @@ use crate::scene::{DamageClass, NEW_DAMAGE_COLOUR};
 use crate::scene::{ImageScale, SceneError};
 
 /// The newest `twin.ron` format this program reads and the one it writes.
-pub const PROJECT_FORMAT_VERSION: u32 = 1;
+/// 2: surveys gained `alignment`, `views`, `changes` and `appearance` (a version-1 program would
+/// ignore an alignment and misplace the survey, so it must refuse these files).
+pub const PROJECT_FORMAT_VERSION: u32 = 2;
 
 /// The project file's name inside a project folder.
 pub const PROJECT_FILE: &str = "twin.ron";
@@ -27,7 +29,7 @@ pub struct ClassStyle {
 
 /// One survey (a capture of the structure at one date): its inputs and, once trained, outputs.
 /// Relative paths are relative to the folder holding `twin.ron` (see `Project::resolve`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Survey {
     pub name: String,
     /// ISO date `YYYY-MM-DD`; surveys are kept in this order (ties keep insertion order).
@@ -40,6 +42,75 @@ pub struct Survey {
     /// Metrics JSON of the last evaluation.
     #[serde(default)]
     pub metrics: Option<PathBuf>,
+    /// Where the dataset's frame sits in the twin's (None: its poses already are in the twin's
+    /// frame).
+    #[serde(default)]
+    pub alignment: Option<Alignment>,
+    /// The dataset's views that belong to this survey (None: all); a joint COLMAP model also
+    /// holds the earlier surveys' images.
+    #[serde(default)]
+    pub views: Option<Vec<String>>,
+    /// The folder of this survey's change maps, once changes were detected.
+    #[serde(default)]
+    pub changes: Option<PathBuf>,
+    /// The survey's appearance relative to the twin's colours (lighting differs between surveys).
+    #[serde(default)]
+    pub appearance: Option<ColourTransform>,
+}
+
+/// A similarity from a dataset's frame to the twin's, `x_twin = scale·R·x + translation`, and
+/// how well it was fitted.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Alignment {
+    pub scale: f64,
+    /// Unit quaternion `(x, y, z, w)`.
+    pub rotation: [f64; 4],
+    pub translation: [f64; 3],
+    /// RMS camera-centre distance after the fit, in twin units, and the images it used.
+    pub residual: f64,
+    pub shared: usize,
+    pub inliers: usize,
+}
+
+/// An affine colour transform: `photo = matrix · twin_colour + offset` (rows of `matrix`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ColourTransform {
+    pub matrix: [[f32; 3]; 3],
+    pub offset: [f32; 3],
+}
+
+impl ColourTransform {
+    pub const IDENTITY: ColourTransform = ColourTransform {
+        matrix: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        offset: [0.0; 3],
+    };
+
+    fn matrix(&self) -> glam::Mat3 {
+        glam::Mat3::from_cols_array_2d(&self.matrix).transpose()
+    }
+
+    /// Applies `photo = M · colour + o` to an image in place.
+    pub fn apply(&self, image: &mut crate::scene::RgbImage) {
+        let (m, o) = (self.matrix(), glam::Vec3::from_array(self.offset));
+        for rgb in image.data.chunks_exact_mut(3) {
+            let v = m * glam::Vec3::new(rgb[0], rgb[1], rgb[2]) + o;
+            rgb.copy_from_slice(&v.to_array());
+        }
+    }
+
+    /// The inverse, `colour = M⁻¹ (photo − o)`, in place and clamped to [0, 1]: a photo as it
+    /// would look in the twin's light. Leaves the image as it is when `M` is singular.
+    pub fn undo(&self, photo: &mut crate::scene::RgbImage) {
+        let m = self.matrix();
+        if !(m.determinant().abs() > 1e-6) {
+            return;
+        }
+        let (inverse, o) = (m.inverse(), glam::Vec3::from_array(self.offset));
+        for rgb in photo.data.chunks_exact_mut(3) {
+            let v = inverse * (glam::Vec3::new(rgb[0], rgb[1], rgb[2]) - o);
+            rgb.copy_from_slice(&v.clamp(glam::Vec3::ZERO, glam::Vec3::ONE).to_array());
+        }
+    }
 }
 
 /// Project-wide settings. Every field has a default, so files written before a field existed
@@ -280,7 +351,7 @@ mod tests {
             date: date.into(),
             dataset: PathBuf::from(format!("surveys/{name}")),
             model: Some(PathBuf::from(format!("surveys/{name}/model.ply"))),
-            metrics: None,
+            ..Survey::default()
         }
     }
 

@@ -4,6 +4,11 @@
 //! survey's model is never overwritten. Uses `scene` for the file format, `train`/`damage` for
 //! the work; must not contain UI.
 
+pub mod align;
+pub mod appearance;
+pub mod changes;
+pub mod survey;
 pub mod twin;
+pub mod update;
 
 pub use twin::{TimelineError, Twin};

@@ -132,6 +132,7 @@ impl Twin {
             dataset: self.relative(dataset),
             model: None,
             metrics: None,
+            ..Default::default()
         };
         self.project
             .add_survey(survey)
@@ -279,6 +280,7 @@ impl Twin {
                         dataset: stored,
                         model: None,
                         metrics: None,
+                        ..Default::default()
                     })
                     .map_err(|source| TimelineError::Survey {
                         file: self.file(),

@@ -405,6 +405,7 @@ pub fn project_target() -> Target {
                 dataset: format!("surveys/{name}").into(),
                 model: Some(format!("surveys/{name}/model.ply").into()),
                 metrics: None,
+                ..Default::default()
             })
             .unwrap();
     }

@@ -16,14 +16,7 @@ use damage_twin::damage::study::{StudyConfig, StudyEvent, StudyRow, run_study};
 use damage_twin::report::study_chart::{study_csv, study_table, write_study_chart};
 use damage_twin::scene::ImageScale;
 
-use super::args::{HoldoutArgs, open_dataset, palette, parse_scale, print_line};
-
-#[derive(clap::Subcommand, Debug)]
-pub enum Study {
-    /// How much mask error the twin removes: train on corrupted masks at each rate, compare the
-    /// rendered masks with the clean ones.
-    MaskNoise(MaskNoiseArgs),
-}
+use crate::cli::args::{HoldoutArgs, open_dataset, palette, parse_scale, print_line};
 
 #[derive(clap::Args, Debug)]
 pub struct MaskNoiseArgs {
@@ -91,8 +84,7 @@ struct StudyFile<'a> {
     rows: &'a [StudyRow],
 }
 
-pub fn run(study: Study) -> anyhow::Result<()> {
-    let Study::MaskNoise(args) = study;
+pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
     if args.replot {
         let path = args.out.join("study.json");
         let text = std::fs::read_to_string(&path)

@@ -1,0 +1,32 @@
+//! `damage-twin study …`: measurements that answer an inspector's questions with numbers, each
+//! writing JSON, CSV, a Markdown table and a chart. One file per study.
+
+mod hierarchy;
+mod mask_noise;
+
+#[derive(clap::Subcommand, Debug)]
+pub enum Study {
+    /// How much mask error the twin removes: train on corrupted masks at each rate, compare the
+    /// rendered masks with the clean ones.
+    MaskNoise(mask_noise::MaskNoiseArgs),
+    /// The hierarchy's efficiency: full high-resolution training against a coarse twin, coarse +
+    /// fine-tune and coarse + retrain, in wall time and held-out accuracy.
+    Hierarchy(hierarchy::HierarchyArgs),
+}
+
+pub fn run(study: Study) -> anyhow::Result<()> {
+    match study {
+        Study::MaskNoise(args) => mask_noise::run(args),
+        Study::Hierarchy(args) => hierarchy::run(args),
+    }
+}
+
+/// Writes `text` to `dir/name` atomically.
+pub(crate) fn write_text(dir: &std::path::Path, name: &str, text: &str) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let path = dir.join(name);
+    damage_twin::scene::atomic::write_atomic(&path, |w| {
+        std::io::Write::write_all(w, text.as_bytes())
+    })
+    .with_context(|| format!("writing {}", path.display()))
+}

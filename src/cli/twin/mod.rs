@@ -1,0 +1,41 @@
+//! `damage-twin twin …`: the survey timeline of a twin project (`timeline`): create it, add
+//! surveys, detect changes, update the twin, show its state. One file per subcommand; the work
+//! is the library's.
+
+mod add_survey;
+mod detect;
+mod new;
+mod status;
+mod update;
+
+#[derive(clap::Subcommand, Debug)]
+pub enum Twin {
+    /// Create a twin project from a first survey (trains its model unless one is given).
+    New(new::Args),
+    /// Add a later survey, placed in the twin's frame (same-frame or through a joint COLMAP
+    /// model).
+    AddSurvey(add_survey::Args),
+    /// Find new damage: the twin rendered at a survey's poses against the survey's masks.
+    Detect(detect::Args),
+    /// Update the twin with a survey: its damage refined with its photos, the rest frozen.
+    Update(update::Args),
+    /// The project's surveys, models and damage.
+    Status(status::Args),
+}
+
+pub fn run(command: Twin) -> anyhow::Result<()> {
+    match command {
+        Twin::New(args) => new::run(args),
+        Twin::AddSurvey(args) => add_survey::run(args),
+        Twin::Detect(args) => detect::run(args),
+        Twin::Update(args) => update::run(args),
+        Twin::Status(args) => status::run(args),
+    }
+}
+
+/// Opens a project folder for the CLI.
+pub(crate) fn open(dir: &std::path::Path) -> anyhow::Result<damage_twin::timeline::Twin> {
+    use anyhow::Context;
+    damage_twin::timeline::Twin::open(dir)
+        .with_context(|| format!("opening the twin project {}", dir.display()))
+}

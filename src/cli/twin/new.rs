@@ -1,0 +1,85 @@
+//! `damage-twin twin new DIR --survey NAME --date YYYY-MM-DD --dataset PATH [--model PLY]`:
+//! a twin project whose first survey is `PATH`, with the given model or one trained now (a
+//! coarse label-mode twin by default: the hierarchy starts coarse and refines the damage).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::Context;
+
+use damage_twin::damage::setup::{RunConfig, train_job};
+use damage_twin::scene::ImageScale;
+use damage_twin::timeline::Twin;
+use damage_twin::timeline::update::tag_damage;
+use damage_twin::train::job::JobOptions;
+
+use crate::cli::args::{drive, open_dataset, parse_scale, read_model};
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The project folder (created; must not hold a project yet).
+    pub dir: PathBuf,
+    #[arg(long)]
+    pub survey: String,
+    /// The survey's date, YYYY-MM-DD.
+    #[arg(long)]
+    pub date: String,
+    /// The survey's dataset folder.
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// The survey's model; without one, a model is trained.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Training scale when no model is given (4: 240×135 of a 960×540 survey).
+    #[arg(long, default_value = "4", value_parser = parse_scale)]
+    pub scale: ImageScale,
+    /// Training iterations when no model is given.
+    #[arg(long, default_value_t = 3000)]
+    pub iters: u32,
+    #[arg(long)]
+    pub threads: Option<usize>,
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut twin = Twin::create(&args.dir)?;
+    twin.add_survey(&args.survey, &args.date, &args.dataset)?;
+    twin.project.settings.scale = args.scale;
+    let mut model = match &args.model {
+        Some(path) => read_model(path)?,
+        None => {
+            let dataset = Arc::new(open_dataset(&args.dataset, glam::Vec3::ZERO)?);
+            let config = RunConfig {
+                scale: args.scale,
+                iterations: args.iters,
+                ..RunConfig::default()
+            };
+            let job = train_job(dataset, config, JobOptions::headless(args.threads));
+            let outcome = drive(job, "training", args.quiet, |_| {})?;
+            let metrics = serde_json::json!({
+                "heldout_psnr": outcome.heldout.as_ref().map(|s| s.psnr),
+                "heldout_ssim": outcome.heldout.as_ref().map(|s| s.ssim),
+                "gaussians": outcome.splats.len(),
+                "iterations": outcome.steps,
+                "seconds": outcome.seconds,
+                "scale": args.scale,
+            });
+            twin.save_metrics(&args.survey, &metrics)?;
+            (*outcome.splats).clone()
+        }
+    };
+    // The first survey's damage is first seen in it.
+    tag_damage(&mut model, 0);
+    let path = twin.save_model(&args.survey, &model)?;
+    twin.save()
+        .with_context(|| format!("writing {}", twin.file().display()))?;
+    println!(
+        "created {} with survey {} ({} Gaussians in {})",
+        twin.file().display(),
+        args.survey,
+        model.len(),
+        path.display()
+    );
+    Ok(())
+}

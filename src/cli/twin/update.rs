@@ -1,0 +1,82 @@
+//! `damage-twin twin update DIR --survey NAME [--strategy finetune|retrain]`: the twin of the
+//! survey before NAME, updated with NAME's photos and masks (`timeline::update`), written as
+//! NAME's model; every earlier survey's model stays as it was.
+
+use std::path::PathBuf;
+
+use damage_twin::damage::refine::{RefineConfig, Strategy};
+use damage_twin::damage::select::SelectConfig;
+use damage_twin::damage::{DamageClass, Palette};
+use damage_twin::scene::ImageScale;
+use damage_twin::timeline::update::{UpdateConfig, update_job};
+use damage_twin::train::job::JobOptions;
+
+use crate::cli::args::{drive, parse_scale};
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    pub dir: PathBuf,
+    #[arg(long)]
+    pub survey: String,
+    #[arg(long, default_value = "finetune")]
+    pub strategy: Strategy,
+    /// The resolution the update trains at.
+    #[arg(long, default_value = "1", value_parser = parse_scale)]
+    pub scale: ImageScale,
+    #[arg(long, default_value_t = 1000)]
+    pub iters: u32,
+    /// Train on the photos as they are (no per-photo light compensation).
+    #[arg(long)]
+    pub no_appearance: bool,
+    #[arg(long)]
+    pub threads: Option<usize>,
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut twin = super::open(&args.dir)?;
+    let index = twin.survey_index(&args.survey)?;
+    let palette = Palette {
+        colours: DamageClass::ALL.map(|c| twin.project.colour(c)),
+    };
+    let every = twin.project.settings.held_out_every.max(1) as usize;
+    let config = UpdateConfig {
+        refine: RefineConfig {
+            select: SelectConfig {
+                palette,
+                ..SelectConfig::default()
+            },
+            strategy: args.strategy,
+            scale: args.scale,
+            iterations: args.iters,
+            holdout: damage_twin::train::views::Holdout::Auto { every },
+            background: glam::Vec3::from_array(twin.project.settings.background),
+            ..RefineConfig::default()
+        },
+        appearance: !args.no_appearance,
+    };
+    let job = update_job(
+        twin.clone(),
+        args.survey.clone(),
+        config,
+        JobOptions::headless(args.threads),
+    );
+    let outcome = drive(job, "update", args.quiet, |_| {})?;
+    let path = twin.save_model(&args.survey, &outcome.splats)?;
+    twin.save_metrics(&args.survey, &outcome.report)?;
+    twin.project.surveys[index].appearance = outcome.report.appearance;
+    twin.save()?;
+    let r = &outcome.report;
+    println!(
+        "updated {} from {} in {:.0} s: {} new-damage Gaussians; held-out IoU {:?} → {:?}; model {}",
+        r.survey,
+        r.previous,
+        r.seconds,
+        r.new_damage_gaussians,
+        r.refine.before.iou,
+        r.refine.after.iou,
+        path.display()
+    );
+    Ok(())
+}

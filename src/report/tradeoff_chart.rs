@@ -1,0 +1,200 @@
+//! Speed against accuracy (DESIGN.md "Measuring"): per method one mark of held-out IoU (per
+//! class) and PSNR against wall time, as PNG and SVG, with the rows as CSV and a Markdown table.
+//! Presentation only: the figures arrive measured.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::damage::hierarchy::HierarchyRow;
+use crate::report::ChartError;
+
+type DrawResult = Result<(), Box<dyn std::error::Error>>;
+
+/// Class colours of the chart (the damage palette, darkened where it is too pale on white).
+fn class_colour(class: &str) -> RGBColor {
+    match class {
+        "crack" => RGBColor(220, 30, 30),
+        "spalling" => RGBColor(200, 110, 150),
+        "rebar" => RGBColor(190, 160, 0),
+        _ => RGBColor(80, 80, 80),
+    }
+}
+
+fn span(values: impl Iterator<Item = f64>, pad_fraction: f64) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    if !(lo <= hi) {
+        return (0.0, 1.0);
+    }
+    let pad = ((hi - lo) * pad_fraction).max(1e-3);
+    (lo - pad, hi + pad)
+}
+
+fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, rows: &[HierarchyRow]) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE)?;
+    let (left, right) = root.split_horizontally(root.dim_in_pixel().0 / 2);
+    let (x0, x1) = span(rows.iter().map(|r| r.seconds), 0.1);
+    let x = (x0.min(0.0), x1);
+    let classes: Vec<String> = rows
+        .iter()
+        .flat_map(|r| r.iou.keys().cloned())
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+
+    // IoU per class against seconds.
+    let (y0, y1) = span(rows.iter().flat_map(|r| r.iou.values().copied()), 0.15);
+    let mut chart = ChartBuilder::on(&left)
+        .caption("held-out IoU against wall time", ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(36)
+        .y_label_area_size(48)
+        .build_cartesian_2d(x.0..x.1, y0.max(0.0)..y1.min(1.0))?;
+    chart
+        .configure_mesh()
+        .x_desc("seconds")
+        .y_desc("IoU")
+        .draw()?;
+    for class in &classes {
+        let colour = class_colour(class);
+        let points: Vec<(f64, f64)> = rows
+            .iter()
+            .filter_map(|r| r.iou.get(class).map(|&v| (r.seconds, v)))
+            .collect();
+        chart
+            .draw_series(points.iter().map(|&p| Circle::new(p, 5, colour.filled())))?
+            .label(class.as_str())
+            .legend(move |(px, py)| Circle::new((px, py), 5, colour.filled()));
+        for (row, &(sx, sy)) in rows
+            .iter()
+            .filter(|r| r.iou.contains_key(class))
+            .zip(&points)
+        {
+            chart.draw_series(std::iter::once(Text::new(
+                row.method.name(),
+                (sx, sy),
+                ("sans-serif", 12).into_font().color(&colour),
+            )))?;
+        }
+    }
+    chart
+        .configure_series_labels()
+        .border_style(BLACK)
+        .background_style(WHITE.mix(0.8))
+        .position(SeriesLabelPosition::LowerRight)
+        .draw()?;
+
+    // PSNR against seconds.
+    let (p0, p1) = span(rows.iter().map(|r| r.psnr), 0.15);
+    let mut chart = ChartBuilder::on(&right)
+        .caption("held-out PSNR against wall time", ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(36)
+        .y_label_area_size(48)
+        .build_cartesian_2d(x.0..x.1, p0..p1)?;
+    chart
+        .configure_mesh()
+        .x_desc("seconds")
+        .y_desc("PSNR (dB)")
+        .draw()?;
+    let blue = RGBColor(40, 90, 200);
+    for row in rows.iter().filter(|r| r.psnr.is_finite()) {
+        let p = (row.seconds, row.psnr);
+        chart.draw_series(std::iter::once(Circle::new(p, 5, blue.filled())))?;
+        chart.draw_series(std::iter::once(Text::new(
+            row.method.name(),
+            p,
+            ("sans-serif", 12).into_font().color(&blue),
+        )))?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// Writes `<stem>.png` and `<stem>.svg` into `dir`.
+pub fn write_tradeoff_chart(
+    dir: &Path,
+    stem: &str,
+    rows: &[HierarchyRow],
+) -> Result<Vec<PathBuf>, ChartError> {
+    let png = dir.join(format!("{stem}.png"));
+    let svg = dir.join(format!("{stem}.svg"));
+    draw(
+        BitMapBackend::new(&png, (1200, 500)).into_drawing_area(),
+        rows,
+    )
+    .map_err(|e| ChartError::new(&png, e))?;
+    draw(SVGBackend::new(&svg, (1200, 500)).into_drawing_area(), rows)
+        .map_err(|e| ChartError::new(&svg, e))?;
+    Ok(vec![png, svg])
+}
+
+fn classes(rows: &[HierarchyRow]) -> Vec<String> {
+    rows.iter()
+        .flat_map(|r| r.iou.keys().cloned())
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect()
+}
+
+/// The rows as CSV: method, seconds, psnr, gaussians, then one IoU column per class.
+pub fn tradeoff_csv(rows: &[HierarchyRow]) -> String {
+    let classes = classes(rows);
+    let mut out = String::from("method,seconds,psnr,gaussians");
+    for c in &classes {
+        let _ = write!(out, ",iou_{c}");
+    }
+    out.push('\n');
+    for r in rows {
+        let _ = write!(
+            out,
+            "{},{:.1},{:.3},{}",
+            r.method.name(),
+            r.seconds,
+            r.psnr,
+            r.gaussians
+        );
+        for c in &classes {
+            let _ = write!(out, ",{:.4}", r.iou.get(c).copied().unwrap_or(f64::NAN));
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// The rows as a Markdown table (for docs/).
+pub fn tradeoff_table(rows: &[HierarchyRow]) -> String {
+    let classes = classes(rows);
+    let mut out = String::from("| method | wall time | PSNR |");
+    for c in &classes {
+        let _ = write!(out, " {c} IoU |");
+    }
+    out.push_str(" Gaussians |\n|---|---|---|");
+    for _ in &classes {
+        out.push_str("---|");
+    }
+    out.push_str("---|\n");
+    for r in rows {
+        let _ = write!(
+            out,
+            "| {} | {:.0} s | {:.2} dB |",
+            r.method.name(),
+            r.seconds,
+            r.psnr
+        );
+        for c in &classes {
+            let _ = write!(out, " {:.3} |", r.iou.get(c).copied().unwrap_or(f64::NAN));
+        }
+        let _ = writeln!(out, " {} |", r.gaussians);
+    }
+    out
+}

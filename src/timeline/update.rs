@@ -1,0 +1,261 @@
+//! The targeted update (the paper's §2.4): a later survey's masks select the Gaussians of old
+//! and new damage (and their neighbours), and a hull-restricted refinement with the new photos,
+//! mapped into the twin's light, trains only them. New damage takes the survey's tag, so it
+//! renders in the new-damage colour while old damage keeps its class colour; the earlier
+//! survey's model is read, never written.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::damage::evaluate::{DamageReadout, predicted_masks};
+use crate::damage::refine::{Quality, RefineConfig, RefineReport, refine};
+use crate::raster::{RenderSettings, render};
+use crate::scene::project::ColourTransform;
+use crate::scene::{Dataset, Mask};
+use crate::splats::Splats;
+use crate::splats::model::{NO_SURVEY, sigmoid};
+use crate::timeline::appearance::{fit_transform, unchanged_pixels};
+use crate::timeline::twin::{TimelineError, Twin};
+use crate::train::job::{Job, JobContext, JobError, JobOptions};
+use crate::train::views::split_views;
+
+/// How an update runs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UpdateConfig {
+    pub refine: RefineConfig,
+    /// Fit and compensate each photo's light (off: train on the photos as they are).
+    pub appearance: bool,
+}
+
+/// What an update did and measured (the survey's `metrics.json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct UpdateReport {
+    pub survey: String,
+    pub previous: String,
+    /// The survey's light relative to the twin's: the transform fitted over all its views.
+    pub appearance: Option<ColourTransform>,
+    /// Gaussians first seen as damage in this survey, and damage Gaussians from before.
+    pub new_damage_gaussians: usize,
+    pub old_damage_gaussians: usize,
+    /// The previous survey's held-out views, outside the damage, before and after the update:
+    /// the unchanged parts keep their look when these agree.
+    pub previous_look_psnr_before: Option<f64>,
+    pub previous_look_psnr_after: Option<f64>,
+    pub seconds: f64,
+    pub refine: RefineReport,
+}
+
+/// The updated model and its report.
+#[derive(Clone, Debug)]
+pub struct UpdateOutcome {
+    pub splats: Splats,
+    pub report: UpdateReport,
+}
+
+/// Tags damage Gaussians with no survey yet as first seen in `survey` (label probability above
+/// one half in any class). Returns how many it tagged.
+pub fn tag_damage(splats: &mut Splats, survey: u16) -> usize {
+    let channels = splats.label_channels;
+    let mut tagged = 0;
+    for g in 0..splats.len() {
+        if splats.meta.damage_survey[g] != NO_SURVEY || channels == 0 {
+            continue;
+        }
+        if splats.labels_of(g).iter().any(|&l| sigmoid(l) > 0.5) {
+            splats.meta.damage_survey[g] = survey;
+            tagged += 1;
+        }
+    }
+    tagged
+}
+
+/// Starts the update of `survey` from the survey before it.
+pub fn update_job(
+    twin: Twin,
+    survey: String,
+    config: UpdateConfig,
+    options: JobOptions,
+) -> Job<UpdateOutcome> {
+    Job::spawn("update", options, move |ctx| {
+        update(ctx, &twin, &survey, &config)
+    })
+}
+
+fn timeline_error(e: TimelineError) -> JobError {
+    JobError::other(e)
+}
+
+/// The update of survey `name` in the calling job.
+pub fn update(
+    ctx: &mut JobContext,
+    twin: &Twin,
+    name: &str,
+    config: &UpdateConfig,
+) -> Result<UpdateOutcome, JobError> {
+    let started = Instant::now();
+    let index = twin.survey_index(name).map_err(timeline_error)?;
+    let previous = index
+        .checked_sub(1)
+        .map(|i| twin.project.surveys[i].name.clone())
+        .ok_or_else(|| {
+            JobError::Invalid(format!(
+                "`{name}` is the first survey: there is no twin to update (train it with `twin new`)"
+            ))
+        })?;
+    let mut model = twin
+        .load_model(&previous)
+        .map_err(timeline_error)?
+        .ok_or_else(|| {
+            JobError::Invalid(format!(
+                "survey `{previous}` has no model yet: update or train it first"
+            ))
+        })?;
+    // Damage the previous twin knows is old: first seen there at the latest.
+    tag_damage(&mut model, (index - 1) as u16);
+    let dataset = twin.open_survey_dataset(name).map_err(timeline_error)?;
+    let readout = DamageReadout {
+        mode: config.refine.select.mode,
+        ..DamageReadout::for_model(&model, config.refine.select.palette)
+    };
+
+    let mut refine_config = config.refine.clone();
+    refine_config.select.lift_unlabelled = true;
+    let mut appearance = None;
+    if config.appearance {
+        ctx.log("fitting each photo's light against the twin");
+        let (fits, pooled) = fit_appearance(&model, &dataset, &refine_config, &readout)?;
+        refine_config.appearance = fits;
+        appearance = Some(pooled);
+    }
+    let outcome = refine(ctx, &dataset, &model, &refine_config)?;
+    let mut splats = (*outcome.splats).clone();
+    // History: what the update trained or created changed in this survey; damage nobody saw
+    // before is this survey's.
+    let survey = index as u16;
+    let first_new = model.meta.next_id();
+    let trained: std::collections::HashSet<u64> = outcome
+        .selection
+        .selected
+        .iter()
+        .map(|&g| model.meta.ids[g as usize])
+        .collect();
+    for g in 0..splats.len() {
+        let id = splats.meta.ids[g];
+        if id >= first_new || trained.contains(&id) {
+            splats.meta.survey[g] = survey;
+        }
+    }
+    let new_damage = tag_damage(&mut splats, survey);
+    let old_damage = splats
+        .meta
+        .damage_survey
+        .iter()
+        .filter(|&&s| s != NO_SURVEY && s < survey)
+        .count();
+    let (look_before, look_after) = previous_look(twin, &previous, &model, &splats, &readout)?;
+    Ok(UpdateOutcome {
+        splats,
+        report: UpdateReport {
+            survey: name.to_string(),
+            previous,
+            appearance,
+            new_damage_gaussians: new_damage,
+            old_damage_gaussians: old_damage,
+            previous_look_psnr_before: look_before,
+            previous_look_psnr_after: look_after,
+            seconds: started.elapsed().as_secs_f64(),
+            refine: outcome.report,
+        },
+    })
+}
+
+/// Per view, the light of its photo relative to the twin's render (fitted outside the damage,
+/// old and new, grown by 4 px), and the same fitted over every view at once.
+fn fit_appearance(
+    model: &Splats,
+    dataset: &Dataset,
+    config: &RefineConfig,
+    readout: &DamageReadout,
+) -> Result<(BTreeMap<usize, ColourTransform>, ColourTransform), JobError> {
+    let settings = RenderSettings::new(config.background, model.sh_degree);
+    let mut fits = BTreeMap::new();
+    let (mut all_render, mut all_photo) = (Vec::new(), Vec::new());
+    for index in 0..dataset.views.len() {
+        let loaded = dataset.load_view(index, config.scale)?;
+        let out = render(model, &loaded.camera, &settings);
+        let old = predicted_masks(&out, readout);
+        let observed: Vec<&Mask> = loaded.masks.values().collect();
+        let masks: Vec<&Mask> = old.iter().chain(observed).collect();
+        let (w, h) = (loaded.image.width, loaded.image.height);
+        let keep = unchanged_pixels(&masks, w, h, 4);
+        fits.insert(
+            index,
+            fit_transform(&out.color, &loaded.image.data, &|p| keep[p]),
+        );
+        // Every 7th kept pixel of every view for the survey's pooled transform.
+        for (p, k) in keep.iter().enumerate() {
+            if *k && p % 7 == 0 {
+                all_render.extend_from_slice(&out.color[p * 3..p * 3 + 3]);
+                all_photo.extend_from_slice(&loaded.image.data[p * 3..p * 3 + 3]);
+            }
+        }
+    }
+    let pooled = fit_transform(&all_render, &all_photo, &|_| true);
+    Ok((fits, pooled))
+}
+
+/// PSNR of the previous survey's held-out views outside the damage (theirs and the renders'),
+/// for the model before and after the update.
+fn previous_look(
+    twin: &Twin,
+    previous: &str,
+    before: &Splats,
+    after: &Splats,
+    readout: &DamageReadout,
+) -> Result<(Option<f64>, Option<f64>), JobError> {
+    let dataset = twin.open_survey_dataset(previous).map_err(timeline_error)?;
+    let every = twin.project.settings.held_out_every.max(1) as usize;
+    let (_, heldout) = split_views(&dataset, &crate::train::views::Holdout::Auto { every })
+        .map_err(JobError::Invalid)?;
+    let scale = crate::scene::ImageScale::Factor(2);
+    let mut se = [0.0f64; 2];
+    let mut n = 0usize;
+    for &index in &heldout {
+        let loaded = dataset.load_view(index, scale)?;
+        let settings = RenderSettings::new(
+            glam::Vec3::from_array(twin.project.settings.background),
+            before.sh_degree,
+        );
+        let outs = [
+            render(before, &loaded.camera, &settings),
+            render(after, &loaded.camera, &settings),
+        ];
+        let mut masks: Vec<Mask> = loaded.masks.values().cloned().collect();
+        for out in &outs {
+            masks.extend(predicted_masks(out, readout));
+        }
+        let refs: Vec<&Mask> = masks.iter().collect();
+        let keep = unchanged_pixels(&refs, loaded.image.width, loaded.image.height, 2);
+        for (p, k) in keep.iter().enumerate() {
+            if !k {
+                continue;
+            }
+            for (i, out) in outs.iter().enumerate() {
+                for c in 0..3 {
+                    let d = f64::from(out.color[p * 3 + c] - loaded.image.data[p * 3 + c]);
+                    se[i] += d * d;
+                }
+            }
+            n += 3;
+        }
+    }
+    let psnr = |s: f64| (n > 0).then(|| -10.0 * (s / n as f64).max(1e-12).log10());
+    Ok((psnr(se[0]), psnr(se[1])))
+}
+
+/// Held-out quality of the update, for callers that print one line.
+pub fn summary(report: &UpdateReport) -> (&Quality, &Quality) {
+    (&report.refine.before, &report.refine.after)
+}
