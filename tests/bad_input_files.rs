@@ -7,7 +7,7 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 
 use damage_twin::scene::ply::{read_point_cloud, read_splats, write_splats};
-use damage_twin::scene::project::{PROJECT_FILE, Project, Survey};
+use damage_twin::scene::project::{PROJECT_FILE, PROJECT_FORMAT_VERSION, Project, Survey};
 use damage_twin::scene::{
     Camera, Dataset, DatasetFormat, ImageScale, Intrinsics, SceneError, Split, View,
 };
@@ -303,7 +303,11 @@ fn bad_project_files_are_errors_not_panics() {
     let good = std::fs::read_to_string(&path).unwrap();
     Project::load(&path).unwrap();
 
-    let future = good.replacen("format_version: 1", "format_version: 7", 1);
+    let future = good.replacen(
+        &format!("format_version: {PROJECT_FORMAT_VERSION}"),
+        "format_version: 7",
+        1,
+    );
     assert_ne!(
         future, good,
         "the saved file spells format_version as expected"

@@ -314,25 +314,45 @@ pub fn ply_splats_target() -> Target {
         .unwrap()
         + 11;
     let header = String::from_utf8(binary[..end].to_vec()).unwrap();
-    // Rows of 4-byte floats and a trailing 8-byte double id.
-    let row = (end..binary.len()).len() / splats.len();
+    // Each row's scalars in header order, by their declared sizes (floats, the double id,
+    // the uchar state bits): the ASCII and big-endian copies are written property by property.
+    let sizes: Vec<usize> = header
+        .lines()
+        .filter_map(
+            |line| match line.split_whitespace().collect::<Vec<_>>()[..] {
+                ["property", "float", _] => Some(4),
+                ["property", "double", _] => Some(8),
+                ["property", "uchar", _] => Some(1),
+                ["property", ty, name] => panic!("property {name} has a type {ty} this seed lacks"),
+                _ => None,
+            },
+        )
+        .collect();
+    let row = sizes.iter().sum::<usize>();
+    assert_eq!(
+        row * splats.len(),
+        binary.len() - end,
+        "rows match the header"
+    );
     let mut ascii = header.replace("binary_little_endian", "ascii");
     let mut big = header
         .replace("binary_little_endian", "binary_big_endian")
         .into_bytes();
     for r in binary[end..].chunks_exact(row) {
-        let (floats, id) = r.split_at(row - 8);
-        let values: Vec<String> = floats
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes(b.try_into().unwrap()).to_string())
-            .chain([f64::from_le_bytes(id.try_into().unwrap()).to_string()])
-            .collect();
+        let mut values = Vec::with_capacity(sizes.len());
+        let mut at = 0;
+        for &size in &sizes {
+            let bytes = &r[at..at + size];
+            values.push(match size {
+                4 => f32::from_le_bytes(bytes.try_into().unwrap()).to_string(),
+                8 => f64::from_le_bytes(bytes.try_into().unwrap()).to_string(),
+                _ => bytes[0].to_string(),
+            });
+            big.extend(bytes.iter().rev());
+            at += size;
+        }
         ascii.push_str(&values.join(" "));
         ascii.push('\n');
-        for b in floats.chunks_exact(4) {
-            big.extend(b.iter().rev());
-        }
-        big.extend(id.iter().rev());
     }
     std::fs::write(root.join("ascii.ply"), ascii).unwrap();
     std::fs::write(root.join("big.ply"), big).unwrap();

@@ -27,6 +27,8 @@
 //! property float label_rebar     ─┘ (channels beyond the three known are `label_<k>`)
 //! property float survey          survey of first appearance, an integer 0..=65535
 //! property double id             stable Gaussian id, an integer < 2^53
+//! property float damage_survey   survey the Gaussian was first seen as damage (65535: never)
+//! property uchar state           bits: selected 1, hidden 2, locked 4, deleted 8, refined 16
 //! end_header
 //! ```
 //!
@@ -39,8 +41,9 @@
 //!
 //! Reading accepts binary (either endianness) and ASCII, any property order and any numeric
 //! property type, SH degree 0..3 from the `f_rest` count, and missing extras (survey 0, id =
-//! vertex index, no labels). It refuses missing required properties, NaN/Inf (naming the vertex
-//! and property), all-zero rotations, counts the file cannot hold and truncated data.
+//! vertex index, no labels, damage_survey never, state 0). It refuses missing required
+//! properties, NaN/Inf (naming the vertex and property), all-zero rotations, counts the file
+//! cannot hold and truncated data.
 
 mod header;
 mod points;
