@@ -1,0 +1,184 @@
+//! The survey timeline end to end on a tiny two-survey building: a coarse twin of survey 1, survey 2
+//! placed in its frame, change detection and the targeted update. Checks what the library
+//! promises, not quality (the demo-scale figures are in docs/TIMELINE.md): the change maps are
+//! consistent with the masks they come from, the update writes survey 2's model only, survey 1's
+//! model file is byte-identical afterwards, and new damage carries survey 2's tag.
+
+use std::sync::Arc;
+
+use damage_twin::damage::Palette;
+use damage_twin::damage::evaluate::DamageReadout;
+use damage_twin::damage::refine::{RefineConfig, Strategy};
+use damage_twin::damage::setup::{RunConfig, prepare_run};
+use damage_twin::scene::open::OpenOptions;
+use damage_twin::scene::{Dataset, ImageScale};
+use damage_twin::splats::Splats;
+use damage_twin::splats::model::NO_SURVEY;
+use damage_twin::timeline::Twin;
+use damage_twin::timeline::changes::{DetectConfig, detect};
+use damage_twin::timeline::survey::AlignMode;
+use damage_twin::timeline::update::{UpdateConfig, update_job};
+use damage_twin::train::job::JobOptions;
+use damage_twin::train::run::train;
+
+/// A tiny two-survey building and a coarse label-mode twin of survey 1.
+fn two_surveys_and_a_coarse_twin(dir: &std::path::Path) -> Splats {
+    let params = damage_twin::synth::SynthParams {
+        width: 192,
+        height: 108,
+        views: 12,
+        views_survey2: 8,
+        surveys: 2,
+        sparse_points: 3000,
+        ..damage_twin::synth::SynthParams::demo(dir.join("synth"))
+    };
+    damage_twin::synth::generate(&params, &|_, _| {}).expect("synth");
+    let dataset = Arc::new(
+        Dataset::open(&dir.join("synth/survey-1"), &OpenOptions::default()).expect("dataset"),
+    );
+    let config = RunConfig {
+        scale: ImageScale::Factor(2),
+        iterations: 300,
+        ..RunConfig::default()
+    };
+    let run = prepare_run(&dataset, &config).expect("prepares");
+    let outcome = train(run.setup, JobOptions::headless(None))
+        .wait()
+        .expect("trains");
+    (*outcome.splats).clone()
+}
+
+#[test]
+fn detection_and_update_keep_the_history() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let coarse = two_surveys_and_a_coarse_twin(dir.path());
+
+    let mut twin = Twin::create(&dir.path().join("project")).expect("creates the project");
+    twin.add_survey("2024", "2024-06-01", &dir.path().join("synth/survey-1"))
+        .expect("adds survey 1");
+    let first_model = twin.save_model("2024", &coarse).expect("saves survey 1");
+    twin.save().expect("saves the project");
+    let placed = twin
+        .add_placed_survey(
+            "2025",
+            "2025-06-01",
+            &dir.path().join("synth/survey-2"),
+            AlignMode::SameFrame,
+        )
+        .expect("places survey 2");
+    assert!(placed.is_none(), "same-frame needs no registration");
+    twin.save().expect("saves the project");
+    let first_bytes = std::fs::read(&first_model).expect("reads survey 1's model");
+
+    // Change detection: every map is consistent with the masks it was made from.
+    let palette = Palette::default();
+    let config = DetectConfig {
+        scale: ImageScale::Factor(2),
+        readout: DamageReadout::for_model(&coarse, palette),
+        background: glam::Vec3::ZERO,
+        band_px: 2,
+        min_area_px: 6,
+        vote: true,
+    };
+    let dataset = twin.open_survey_dataset("2025").expect("opens survey 2");
+    let mut progress = Vec::new();
+    let detection = detect(&coarse, &dataset, &config, &mut |done, total| {
+        progress.push((done, total))
+    })
+    .expect("detects");
+    assert_eq!(detection.views.len(), dataset.views.len());
+    assert_eq!(
+        progress.last().map(|&(done, total)| done == total),
+        Some(true)
+    );
+    let mut observed_pixels = 0;
+    for view in &detection.views {
+        for class in 0..view.observed.len() {
+            let (old, seen) = (&view.old[class], &view.observed[class]);
+            let (new, gone) = (&view.new[class], &view.gone[class]);
+            assert_eq!((new.width, new.height), (seen.width, seen.height));
+            for p in 0..seen.data.len() {
+                let [is_old, is_seen] = [old.data[p] != 0, seen.data[p] != 0];
+                let [is_new, is_gone] = [new.data[p] != 0, gone.data[p] != 0];
+                assert!(!is_new || is_seen, "{}: new but not seen", view.name);
+                assert!(!is_new || !is_old, "{}: new but old", view.name);
+                assert!(!is_gone || is_old, "{}: gone but not old", view.name);
+                assert!(!is_gone || !is_seen, "{}: gone but seen", view.name);
+            }
+            observed_pixels += seen.data.iter().filter(|&&d| d != 0).count();
+        }
+    }
+    assert!(observed_pixels > 0, "survey 2 has damage to compare");
+    let steps: Vec<&str> = detection.steps.iter().map(|s| s.step.as_str()).collect();
+    assert_eq!(steps.first(), Some(&"raw"));
+    assert!(
+        detection
+            .summary()
+            .is_some_and(|s| !s.truth_pixels.is_empty()),
+        "the synthetic survey's truth/new-damage is scored"
+    );
+
+    // The update: survey 2's model is written, survey 1's is not touched.
+    let config = UpdateConfig {
+        refine: RefineConfig {
+            strategy: Strategy::Finetune,
+            scale: ImageScale::Factor(1),
+            select_scale: ImageScale::Factor(2),
+            iterations: 40,
+            ..RefineConfig::default()
+        },
+        appearance: true,
+    };
+    let outcome = update_job(
+        twin.clone(),
+        "2025".into(),
+        config,
+        JobOptions::headless(None),
+    )
+    .wait()
+    .expect("updates");
+    let second_model = twin
+        .save_model("2025", &outcome.splats)
+        .expect("saves survey 2");
+    twin.save().expect("saves the project");
+    assert_ne!(first_model, second_model);
+    assert_eq!(
+        std::fs::read(&first_model).expect("reads survey 1's model again"),
+        first_bytes,
+        "survey 1's model is byte-identical after the update"
+    );
+
+    // History: survey 2's model holds survey 1's Gaussians (fine-tune keeps the count) with
+    // survey 1's damage tagged 0 and the damage first seen now tagged 1.
+    let reopened = Twin::open(&dir.path().join("project")).expect("reopens");
+    let updated = reopened
+        .load_model("2025")
+        .expect("loads")
+        .expect("survey 2 has a model");
+    let before = reopened
+        .load_model("2024")
+        .expect("loads")
+        .expect("survey 1 has a model");
+    assert_eq!(updated.len(), before.len());
+    let tags = &updated.meta.damage_survey;
+    let new_tagged = tags.iter().filter(|&&s| s == 1).count();
+    let old_tagged = tags.iter().filter(|&&s| s == 0).count();
+    assert_eq!(new_tagged, outcome.report.new_damage_gaussians);
+    assert_eq!(old_tagged, outcome.report.old_damage_gaussians);
+    assert!(old_tagged > 0, "survey 1's damage is tagged as old");
+    assert!(
+        tags.iter().all(|&s| s == NO_SURVEY || s <= 1),
+        "no tag beyond the surveys there are"
+    );
+    let survey_one_tags = before
+        .meta
+        .damage_survey
+        .iter()
+        .filter(|&&s| s != NO_SURVEY)
+        .count();
+    assert!(
+        survey_one_tags <= old_tagged,
+        "tags of survey 1's model are kept"
+    );
+    assert!(outcome.report.appearance.is_some(), "the light was fitted");
+}
