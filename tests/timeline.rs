@@ -15,7 +15,7 @@ use damage_twin::scene::{Dataset, ImageScale};
 use damage_twin::splats::Splats;
 use damage_twin::splats::model::NO_SURVEY;
 use damage_twin::timeline::Twin;
-use damage_twin::timeline::changes::{DetectConfig, detect};
+use damage_twin::timeline::changes::{DetectConfig, OLD_DAMAGE_THRESHOLD, detect};
 use damage_twin::timeline::survey::AlignMode;
 use damage_twin::timeline::update::{UpdateConfig, update_job};
 use damage_twin::train::job::JobOptions;
@@ -79,10 +79,11 @@ fn detection_and_update_keep_the_history() {
         band_px: 2,
         min_area_px: 6,
         vote: true,
+        old_threshold: OLD_DAMAGE_THRESHOLD,
     };
     let dataset = twin.open_survey_dataset("2025").expect("opens survey 2");
     let mut progress = Vec::new();
-    let detection = detect(&coarse, &dataset, &config, &mut |done, total| {
+    let detection = detect(&coarse, &dataset, &config, None, &mut |done, total| {
         progress.push((done, total))
     })
     .expect("detects");

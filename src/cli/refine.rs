@@ -90,6 +90,16 @@ struct SelectionFile<'a> {
     validated_ids: Vec<u64>,
 }
 
+/// `metrics.json`: the report, with the held-out PSNR outside the hulls also at the top level
+/// (the figure that says the frozen rest was left alone).
+#[derive(Serialize)]
+struct MetricsFile<'a> {
+    psnr_outside_hulls_before: Option<f64>,
+    psnr_outside_hulls_after: Option<f64>,
+    #[serde(flatten)]
+    report: &'a damage_twin::damage::refine::RefineReport,
+}
+
 pub fn parse_classes(names: &[String]) -> anyhow::Result<Vec<DamageClass>> {
     names
         .iter()
@@ -208,9 +218,14 @@ fn write_outputs(
     let model_path = out.join("model.ply");
     damage_twin::scene::ply::write_splats(&model_path, &outcome.splats)
         .with_context(|| format!("writing {}", model_path.display()))?;
+    let metrics = MetricsFile {
+        psnr_outside_hulls_before: report.before.psnr_outside_hulls,
+        psnr_outside_hulls_after: report.after.psnr_outside_hulls,
+        report,
+    };
     write_text(
         &out.join("metrics.json"),
-        &serde_json::to_string_pretty(report)?,
+        &serde_json::to_string_pretty(&metrics)?,
     )
 }
 

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use crate::synth::{SynthError, SynthParams};
 
 /// Bumped when the demo's generation settings change, so stale caches are regenerated.
-const DEMO_VERSION: &str = "demo-v1";
+const DEMO_VERSION: &str = "demo-v2";
 const MARKER: &str = ".damage-twin-demo";
 
 /// The demo the viewer trains live: synth's building at 960×540 (issue 7's stated scale), fewer
@@ -40,9 +40,10 @@ pub fn dataset_dir(dir: &Path) -> PathBuf {
     dir.join("survey-1")
 }
 
-/// Generates the demo (one survey of `synth`'s demo building; `views` 0 keeps synth's count)
-/// into `dir` unless it is already there, and returns the dataset folder. `progress(fraction,
-/// message)` is called from the generating threads. The folder appears only once complete.
+/// Generates the demo (`synth`'s demo building at both survey dates, `survey-1/` and
+/// `survey-2/`; `views` 0 keeps synth's count for survey 1) into `dir` unless it is already
+/// there, and returns survey 1's dataset folder. `progress(fraction, message)` is called from
+/// the generating threads. The folder appears only once complete.
 pub fn ensure(
     dir: &Path,
     views: usize,
@@ -68,7 +69,7 @@ pub fn ensure(
         std::fs::remove_dir_all(&tmp).map_err(io(&tmp))?;
     }
     let mut params = SynthParams::demo(&tmp);
-    params.surveys = 1;
+    params.surveys = 2;
     params.width = width;
     params.height = height;
     if views > 0 {

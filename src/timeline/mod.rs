@@ -7,6 +7,7 @@
 pub mod align;
 pub mod appearance;
 pub mod changes;
+pub mod earlier;
 pub mod survey;
 pub mod twin;
 pub mod update;

@@ -17,6 +17,7 @@ use crate::scene::{Dataset, Mask};
 use crate::splats::Splats;
 use crate::splats::model::{NO_SURVEY, sigmoid};
 use crate::timeline::appearance::{fit_transform, unchanged_pixels};
+use crate::timeline::changes::without_near_floaters;
 use crate::timeline::twin::{TimelineError, Twin};
 use crate::train::job::{Job, JobContext, JobError, JobOptions};
 use crate::train::views::split_views;
@@ -184,7 +185,8 @@ fn fit_appearance(
     let (mut all_render, mut all_photo) = (Vec::new(), Vec::new());
     for index in 0..dataset.views.len() {
         let loaded = dataset.load_view(index, config.scale)?;
-        let out = render(model, &loaded.camera, &settings);
+        let seen = without_near_floaters(model, &loaded.camera);
+        let out = render(&seen, &loaded.camera, &settings);
         let old = predicted_masks(&out, readout);
         let observed: Vec<&Mask> = loaded.masks.values().collect();
         let masks: Vec<&Mask> = old.iter().chain(observed).collect();

@@ -11,8 +11,12 @@ use serde::Serialize;
 
 use damage_twin::damage::evaluate::DamageReadout;
 use damage_twin::damage::{DamageClass, Palette};
+use damage_twin::raster::RenderSettings;
 use damage_twin::scene::ImageScale;
-use damage_twin::timeline::changes::{DetectConfig, StepScores, change_picture, detect};
+use damage_twin::timeline::changes::{
+    DetectConfig, OLD_DAMAGE_THRESHOLD, StepScores, change_picture, detect,
+};
+use damage_twin::timeline::earlier::EarlierSurvey;
 
 use crate::cli::args::parse_scale;
 
@@ -28,14 +32,26 @@ pub struct Args {
     #[arg(long, default_value = "2", value_parser = parse_scale)]
     pub scale: ImageScale,
     /// Old damage grown by this many pixels is not new (misregistration, blur).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 0)]
     pub band: u32,
     /// New-damage blobs smaller than this are dropped (pixels at the detection scale).
-    #[arg(long, default_value_t = 6)]
+    #[arg(long, default_value_t = 0)]
     pub min_area: usize,
-    /// Skip the vote in 3D.
+    /// Also drop candidates the earlier survey's own masks show at the same surface point
+    /// (off by default: on the demo it removes growth next to old damage, docs/TIMELINE.md).
     #[arg(long)]
-    pub no_vote: bool,
+    pub earlier: bool,
+    /// Earlier-survey check: mask pixels within this distance (pixels at the detection scale)
+    /// of a candidate's surface point count as the earlier survey showing it.
+    #[arg(long, default_value_t = 2)]
+    pub earlier_radius: u32,
+    /// Add the vote in 3D over the twin's Gaussians (off by default: on a coarse twin it drops
+    /// thin new damage, docs/TIMELINE.md).
+    #[arg(long)]
+    pub vote: bool,
+    /// Label mode: the class probability above which the twin's render is old damage.
+    #[arg(long, default_value_t = OLD_DAMAGE_THRESHOLD)]
+    pub old_threshold: f32,
 }
 
 #[derive(Serialize)]
@@ -55,7 +71,7 @@ struct Summary<'a> {
     scale: ImageScale,
     views: usize,
     new_damage: BTreeMap<String, ClassFigures>,
-    /// The same figures after each cleaning step: raw, band, area, vote.
+    /// The same figures after each cleaning step: raw, band, area, earlier, vote.
     steps: &'a [StepScores],
 }
 
@@ -84,9 +100,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         background: glam::Vec3::from_array(twin.project.settings.background),
         band_px: args.band,
         min_area_px: args.min_area,
-        vote: !args.no_vote,
+        vote: args.vote,
+        old_threshold: args.old_threshold,
     };
-    let detection = detect(&model, &dataset, &config, &mut |_, _| {})?;
+    let earlier = if !args.earlier {
+        None
+    } else {
+        let settings = RenderSettings::new(config.background, model.sh_degree);
+        let earlier_dataset = twin.open_survey_dataset(&previous)?;
+        Some(EarlierSurvey::load(
+            &model,
+            &earlier_dataset,
+            args.scale,
+            &settings,
+            args.earlier_radius,
+        )?)
+    };
+    let detection = detect(&model, &dataset, &config, earlier.as_ref(), &mut |_, _| {})?;
     let folder = twin.survey_dir(&args.survey).join("changes");
     std::fs::create_dir_all(&folder).with_context(|| format!("creating {}", folder.display()))?;
     for view in &detection.views {
