@@ -3,22 +3,21 @@
 //! and rendering only the tiles a loss region needs trains exactly what rendering every tile
 //! trains.
 
+mod twin_support;
+
 use std::sync::Arc;
 
 use glam::{Quat, Vec3};
 
 use damage_twin::damage::refine::{RefineConfig, Strategy, refine_job};
-use damage_twin::damage::setup::{RunConfig, prepare_run};
 use damage_twin::raster::{
     PixelGrads, RasterBackend, Rasterizer, RenderOutput, RenderSettings, SplatGrads, StageTimings,
     render,
 };
-use damage_twin::scene::open::OpenOptions;
-use damage_twin::scene::{Camera, Dataset, ImageScale, Intrinsics, Mask, RgbImage};
+use damage_twin::scene::{Camera, ImageScale, Intrinsics, Mask, RgbImage};
 use damage_twin::splats::Splats;
 use damage_twin::splats::model::state;
 use damage_twin::train::job::JobOptions;
-use damage_twin::train::run::train;
 use damage_twin::train::spec::{TrainSpec, TrainView};
 use damage_twin::train::trainer::Trainer;
 
@@ -152,36 +151,10 @@ fn bits(values: &[f32]) -> Vec<u32> {
     values.iter().map(|v| v.to_bits()).collect()
 }
 
-/// A tiny synthetic survey and a coarse label-mode twin of it.
-fn coarse_twin(dir: &std::path::Path) -> (Arc<Dataset>, Splats) {
-    let params = damage_twin::synth::SynthParams {
-        width: 192,
-        height: 108,
-        views: 12,
-        surveys: 1,
-        sparse_points: 3000,
-        ..damage_twin::synth::SynthParams::demo(dir.join("synth"))
-    };
-    damage_twin::synth::generate(&params, &|_, _| {}).expect("synth");
-    let dataset = Arc::new(
-        Dataset::open(&dir.join("synth/survey-1"), &OpenOptions::default()).expect("dataset"),
-    );
-    let config = RunConfig {
-        scale: ImageScale::Factor(2),
-        iterations: 300,
-        ..RunConfig::default()
-    };
-    let run = prepare_run(&dataset, &config).expect("prepares");
-    let outcome = train(run.setup, JobOptions::headless(None))
-        .wait()
-        .expect("trains");
-    (dataset, (*outcome.splats).clone())
-}
-
 #[test]
 fn refinement_trains_the_selection_and_freezes_the_rest() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let (dataset, coarse) = coarse_twin(dir.path());
+    let (dataset, coarse) = twin_support::coarse_twin(dir.path(), 1);
     let config = RefineConfig {
         strategy: Strategy::Finetune,
         scale: ImageScale::Factor(1),

@@ -4,54 +4,23 @@
 //! consistent with the masks they come from, the update writes survey 2's model only, survey 1's
 //! model file is byte-identical afterwards, and new damage carries survey 2's tag.
 
-use std::sync::Arc;
+mod twin_support;
 
 use damage_twin::damage::Palette;
 use damage_twin::damage::evaluate::DamageReadout;
 use damage_twin::damage::refine::{RefineConfig, Strategy};
-use damage_twin::damage::setup::{RunConfig, prepare_run};
-use damage_twin::scene::open::OpenOptions;
-use damage_twin::scene::{Dataset, ImageScale};
-use damage_twin::splats::Splats;
+use damage_twin::scene::ImageScale;
 use damage_twin::splats::model::NO_SURVEY;
 use damage_twin::timeline::Twin;
 use damage_twin::timeline::changes::{DetectConfig, OLD_DAMAGE_THRESHOLD, detect};
 use damage_twin::timeline::survey::AlignMode;
 use damage_twin::timeline::update::{UpdateConfig, update_job};
 use damage_twin::train::job::JobOptions;
-use damage_twin::train::run::train;
-
-/// A tiny two-survey building and a coarse label-mode twin of survey 1.
-fn two_surveys_and_a_coarse_twin(dir: &std::path::Path) -> Splats {
-    let params = damage_twin::synth::SynthParams {
-        width: 192,
-        height: 108,
-        views: 12,
-        views_survey2: 8,
-        surveys: 2,
-        sparse_points: 3000,
-        ..damage_twin::synth::SynthParams::demo(dir.join("synth"))
-    };
-    damage_twin::synth::generate(&params, &|_, _| {}).expect("synth");
-    let dataset = Arc::new(
-        Dataset::open(&dir.join("synth/survey-1"), &OpenOptions::default()).expect("dataset"),
-    );
-    let config = RunConfig {
-        scale: ImageScale::Factor(2),
-        iterations: 300,
-        ..RunConfig::default()
-    };
-    let run = prepare_run(&dataset, &config).expect("prepares");
-    let outcome = train(run.setup, JobOptions::headless(None))
-        .wait()
-        .expect("trains");
-    (*outcome.splats).clone()
-}
 
 #[test]
 fn detection_and_update_keep_the_history() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let coarse = two_surveys_and_a_coarse_twin(dir.path());
+    let (_, coarse) = twin_support::coarse_twin(dir.path(), 2);
 
     let mut twin = Twin::create(&dir.path().join("project")).expect("creates the project");
     twin.add_survey("2024", "2024-06-01", &dir.path().join("synth/survey-1"))
