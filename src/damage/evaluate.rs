@@ -45,6 +45,16 @@ impl DamageReadout {
 /// Per class the predicted mask of one render (`DamageClass::ALL` order). Label mode on a model
 /// without label channels, and RGB mode, predict nothing.
 pub fn predicted_masks(out: &RenderOutput, readout: &DamageReadout) -> Vec<Mask> {
+    predicted_masks_at(out, readout, LABEL_THRESHOLD)
+}
+
+/// `predicted_masks` with another label-mode threshold: a label channel above
+/// `label_threshold` is damage (overlay mode reads colours as before).
+pub fn predicted_masks_at(
+    out: &RenderOutput,
+    readout: &DamageReadout,
+    label_threshold: f32,
+) -> Vec<Mask> {
     let (w, h) = (out.width, out.height);
     match readout.mode {
         TrainMode::Overlay => detect_overlay(&out.color, w, h, &readout.palette, readout.tolerance),
@@ -58,7 +68,7 @@ pub fn predicted_masks(out: &RenderOutput, readout: &DamageReadout) -> Vec<Mask>
                     data: out
                         .labels
                         .chunks_exact(out.label_channels)
-                        .map(|l| u8::from(l[k] > LABEL_THRESHOLD))
+                        .map(|l| u8::from(l[k] > label_threshold))
                         .collect(),
                 }
             })

@@ -9,8 +9,9 @@
 //! Per channel, not a full 3×3 matrix: on a facade the three channels move together, so the
 //! cross terms of a full matrix are nearly undetermined. On the demo building's survey 2 a full
 //! fit came out as `[[1.36, -1.15, 0.59], …]` where the light was gains of about 0.87, 0.82 and
-//! 0.72, and training on photos mapped through it cost survey 1's held-out views 2.5 dB outside
-//! the damage (docs/TIMELINE.md).
+//! 0.72. After an update through it survey 1's held-out views lost 2.5 dB outside the damage,
+//! against 1.9 dB with the per-channel fit: most of that loss has another cause
+//! (docs/TIMELINE.md).
 
 use crate::scene::Mask;
 #[cfg(test)]

@@ -6,12 +6,13 @@
 //! at the same surface points (`earlier`), and a vote in 3D (candidate pixels lifted to the
 //! twin's Gaussians must agree across the views that see them).
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 
 use serde::Serialize;
 
 use crate::damage::DamageClass;
-use crate::damage::evaluate::{DamageReadout, predicted_masks};
+use crate::damage::evaluate::{DamageReadout, LABEL_THRESHOLD, predicted_masks_at};
 use crate::damage::lift::WeightLift;
 use crate::metrics::MaskAgreement;
 use crate::raster::{RenderSettings, render};
@@ -32,14 +33,14 @@ pub struct DetectConfig {
     /// Keep only candidates the views agree on in 3D.
     pub vote: bool,
     /// Label mode: the class probability above which the twin's render counts as old damage.
-    /// Lower than the evaluation's one half: damage the twin shows only faintly from a new
-    /// pose (a label carried by Gaussians seen edge-on, or learnt at a coarse scale) is still
-    /// damage it knows, not new damage.
+    /// Lowering it counts damage the twin shows only faintly from a new pose as old; on the
+    /// demo it trades rebar and spalling recall for crack precision (docs/TIMELINE.md).
     pub old_threshold: f32,
 }
 
-/// The class probability above which the twin's render counts as old damage by default.
-pub const OLD_DAMAGE_THRESHOLD: f32 = 0.5;
+/// The class probability above which the twin's render counts as old damage by default: the
+/// evaluation's own threshold.
+pub const OLD_DAMAGE_THRESHOLD: f32 = LABEL_THRESHOLD;
 
 /// One view's masks per class (`DamageClass::ALL` order).
 #[derive(Clone, Debug)]
@@ -219,7 +220,7 @@ pub fn detect(
         let (camera, mut observed) = dataset.load_view_masks(index, &masks_dir, config.scale)?;
         let k = camera.intrinsics;
         let out = render(&without_near_floaters(twin, &camera), &camera, &settings);
-        let old = old_damage(&out, config);
+        let old = predicted_masks_at(&out, &config.readout, config.old_threshold);
         if earlier.is_some() {
             depths.push(surface_depth(&out));
         }
@@ -333,18 +334,19 @@ const NEAR_FLOATER_FRACTION: f32 = 0.25;
 /// the earlier one did not, and a floater that no earlier view constrained can sit right in
 /// front of a new camera: on the demo building one at 0.18 m covered survey 2's view 4 and hid
 /// a whole wall of old cracks, which all came out as new damage (docs/TIMELINE.md).
-pub fn without_near_floaters(twin: &Splats, camera: &Camera) -> Splats {
+pub fn without_near_floaters<'a>(twin: &'a Splats, camera: &Camera) -> Cow<'a, Splats> {
     let floaters = near_floaters(twin, camera);
-    let mut seen = twin.clone();
-    if floaters.iter().any(|&f| f) {
-        let keep: Vec<bool> = floaters.iter().map(|&f| !f).collect();
-        seen.retain(&keep);
+    if !floaters.iter().any(|&f| f) {
+        return Cow::Borrowed(twin);
     }
-    seen
+    let keep: Vec<bool> = floaters.iter().map(|&f| !f).collect();
+    let mut seen = twin.clone();
+    seen.retain(&keep);
+    Cow::Owned(seen)
 }
 
 /// Per Gaussian, whether it is a floater in front of `camera` (see `without_near_floaters`).
-pub fn near_floaters(twin: &Splats, camera: &Camera) -> Vec<bool> {
+fn near_floaters(twin: &Splats, camera: &Camera) -> Vec<bool> {
     let depths: Vec<f32> = twin
         .means
         .iter()
@@ -359,30 +361,6 @@ pub fn near_floaters(twin: &Splats, camera: &Camera) -> Vec<bool> {
     let clearance = NEAR_FLOATER_FRACTION * *median;
     // Behind the camera is the renderer's to cull; in front but too near is a floater.
     depths.iter().map(|&z| z > 0.0 && z < clearance).collect()
-}
-
-/// What the twin shows as damage in one render: in label mode each class's probability above
-/// `old_threshold`, in overlay mode the class colours.
-fn old_damage(out: &crate::raster::RenderOutput, config: &DetectConfig) -> Vec<Mask> {
-    let classes = DamageClass::ALL.len();
-    if config.readout.mode != crate::damage::TrainMode::Label || out.label_channels < classes {
-        return predicted_masks(out, &config.readout);
-    }
-    DamageClass::ALL
-        .iter()
-        .map(|class| {
-            let k = class.channel();
-            Mask {
-                width: out.width,
-                height: out.height,
-                data: out
-                    .labels
-                    .chunks_exact(out.label_channels)
-                    .map(|l| u8::from(l[k] > config.old_threshold))
-                    .collect(),
-            }
-        })
-        .collect()
 }
 
 /// Keeps the candidate pixels whose Gaussians the views agree on: per class, each Gaussian's

@@ -3,8 +3,8 @@
 //! pixels' width may carry no label at all, and every survey-2 view of it then calls it new. The
 //! earlier survey's masks do show it. A candidate pixel of a later view is lifted to the surface
 //! with the twin's depth, projected into every earlier view that sees that surface point (its
-//! depth there agrees with the twin's), and it is old damage when most of those views' masks
-//! show the same class within a pixel of it. The twin serves only as geometry here.
+//! depth there agrees with the twin's), and it is old damage when at least half of those views'
+//! masks show the same class within `radius_px` of it. The twin serves only as geometry here.
 
 use glam::Vec3;
 
@@ -94,11 +94,7 @@ impl EarlierSurvey {
         Ok(EarlierSurvey { views, radius_px })
     }
 
-    /// Earlier views loaded.
-    pub fn len(&self) -> usize {
-        self.views.len()
-    }
-
+    /// True when no earlier view has masks: the survey gives no evidence.
     pub fn is_empty(&self) -> bool {
         self.views.is_empty()
     }
