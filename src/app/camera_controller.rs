@@ -118,6 +118,13 @@ impl CameraController {
         self.pose
     }
 
+    /// Eases to orbit `target` at a distance that frames a sphere of `radius` (the view
+    /// direction is kept).
+    pub fn frame_target(&mut self, target: Vec3, radius: f32) {
+        self.goal.target = target;
+        self.goal.distance = (radius.max(MIN_DISTANCE) / (self.fov_y * 0.5).sin()) * 1.1;
+    }
+
     pub fn goal(&self) -> OrbitPose {
         self.goal
     }

@@ -48,4 +48,8 @@ pub enum Command {
     UpdateSettings(Box<Settings>),
     /// Show a line in the log / status bar.
     Notify(String),
+    /// Measure the model's damage regions (on a worker thread).
+    MeasureRegions,
+    /// Select region `index` of the last measurement (its damage Gaussians) and frame it.
+    FocusRegion(usize),
 }

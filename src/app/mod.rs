@@ -24,7 +24,7 @@ use std::sync::Arc;
 use crate::app::commands::{Command, DialogKind};
 use crate::app::demo::DemoPreparation;
 use crate::app::panels::{
-    ChartsPanel, LogPanel, ProjectPanel, StatsPanel, TrainingPanel, ViewPanel,
+    ChartsPanel, LogPanel, ProjectPanel, RegionsPanel, StatsPanel, TrainingPanel, ViewPanel,
 };
 use crate::app::settings::Settings;
 use crate::app::state::AppState;
@@ -83,6 +83,7 @@ pub struct TwinApp {
     training: TrainingPanel,
     view: ViewPanel,
     stats: StatsPanel,
+    regions: RegionsPanel,
     charts: ChartsPanel,
     log: LogPanel,
     commands: Vec<Command>,
@@ -109,6 +110,7 @@ impl TwinApp {
             training: TrainingPanel,
             view: ViewPanel,
             stats: StatsPanel,
+            regions: RegionsPanel,
             charts: ChartsPanel,
             log: LogPanel,
             commands: Vec::new(),
@@ -239,6 +241,9 @@ impl eframe::App for TwinApp {
                     egui::CollapsingHeader::new("Statistics")
                         .default_open(true)
                         .show(ui, |ui| self.stats.ui(ui, state, commands));
+                    egui::CollapsingHeader::new("Damage regions")
+                        .default_open(false)
+                        .show(ui, |ui| self.regions.ui(ui, state, commands));
                     egui::CollapsingHeader::new("View")
                         .default_open(false)
                         .show(ui, |ui| self.view.ui(ui, state, commands));

@@ -15,6 +15,7 @@ use crate::app::settings::Settings;
 use crate::app::training::TrainingSession;
 use crate::app::viewport::FrameStats;
 use crate::app::workers;
+use crate::damage::measure::Measurement;
 use crate::scene::{Camera, Dataset, RgbImage};
 use crate::splats::Splats;
 use crate::timeline::Twin;
@@ -64,6 +65,18 @@ pub enum WorkerResult {
         view: usize,
         result: Result<Arc<RgbImage>, String>,
     },
+    /// Damage regions measured on the model of `generation`.
+    Regions {
+        generation: u64,
+        measurement: Arc<Measurement>,
+    },
+}
+
+/// The last damage measurement and the model generation it was made on.
+#[derive(Clone, Debug)]
+pub struct MeasuredRegions {
+    pub generation: u64,
+    pub measurement: Arc<Measurement>,
 }
 
 /// Everything the viewer shows.
@@ -78,6 +91,8 @@ pub struct AppState {
     pub training: Option<TrainingSession>,
     pub history: History,
     pub snap: Option<Snap>,
+    /// Damage regions of the model, once measured.
+    pub regions: Option<MeasuredRegions>,
     pub log: VecDeque<String>,
     /// Viewport size in pixels, as last laid out (for PNG export at screen size).
     pub viewport_pixels: [u32; 2],
@@ -104,6 +119,7 @@ impl AppState {
             training: None,
             history: History::default(),
             snap: None,
+            regions: None,
             log: VecDeque::new(),
             viewport_pixels: [960, 540],
             frame_stats: FrameStats::default(),
@@ -196,6 +212,21 @@ impl AppState {
                     };
                 }
             }
+            WorkerResult::Regions {
+                generation,
+                measurement,
+            } => {
+                self.log_line(format!(
+                    "measured {} damage regions on {} planes in {:.1} s",
+                    measurement.regions.len(),
+                    measurement.planes.len(),
+                    measurement.seconds
+                ));
+                self.regions = Some(MeasuredRegions {
+                    generation,
+                    measurement,
+                });
+            }
         }
     }
 
@@ -208,6 +239,7 @@ impl AppState {
     ) {
         self.stop_training();
         self.snap = None;
+        self.regions = None;
         self.history.clear();
         let cameras: Vec<Camera> = dataset
             .as_ref()
@@ -254,6 +286,42 @@ impl AppState {
         if std::mem::take(&mut self.train_on_open) {
             self.apply(Command::StartTraining);
         }
+    }
+
+    /// Selects region `index`'s damage Gaussians (only those) and frames it.
+    fn focus_region(&mut self, index: usize) {
+        use crate::splats::model::state::SELECTED;
+        let (Some(regions), Some(splats)) = (&self.regions, &self.splats) else {
+            return;
+        };
+        let Some(region) = regions.measurement.regions.get(index) else {
+            return;
+        };
+        let stale = regions.generation != self.splats_generation;
+        if stale && region.members.iter().any(|&g| g as usize >= splats.len()) {
+            self.log_line("the model changed since it was measured: measure again");
+            return;
+        }
+        let mut model = Splats::clone(splats);
+        for bits in &mut model.meta.state {
+            *bits &= !SELECTED;
+        }
+        for &g in &region.members {
+            model.meta.state[g as usize] |= SELECTED;
+        }
+        let (centroid, extent) = (region.centroid, region.length.unwrap_or(region.area.sqrt()));
+        let count = region.members.len();
+        self.set_splats(Arc::new(model));
+        // The selection does not change what was measured.
+        if let Some(r) = &mut self.regions
+            && !stale
+        {
+            r.generation = self.splats_generation;
+        }
+        self.snap = None;
+        let target = glam::DVec3::from_array(centroid).as_vec3();
+        self.camera.frame_target(target, (extent as f32).max(0.3));
+        self.log_line(format!("selected region {} ({count} Gaussians)", index + 1));
     }
 
     fn stop_training(&mut self) {
@@ -325,6 +393,16 @@ impl AppState {
                 }
             }
             Command::SnapToView(index) => self.snap_to(index),
+            Command::MeasureRegions => match &self.splats {
+                Some(splats) => workers::measure_regions(
+                    splats.clone(),
+                    self.splats_generation,
+                    self.survey_cameras(),
+                    self.results_sender(),
+                ),
+                None => self.log_line("nothing to measure yet: no model"),
+            },
+            Command::FocusRegion(index) => self.focus_region(index),
             Command::Unsnap => {
                 if let Some(snap) = self.snap.take() {
                     self.camera.snap_to(&snap.camera);

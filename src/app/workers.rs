@@ -160,6 +160,24 @@ pub fn load_photo(dataset: Arc<Dataset>, index: usize, results: Sender<WorkerRes
     });
 }
 
+/// Measures the damage regions of `splats` (model `generation`), photographed by `cameras`
+/// (metric defaults: the app shows metres).
+pub fn measure_regions(
+    splats: Arc<Splats>,
+    generation: u64,
+    cameras: Vec<Camera>,
+    results: Sender<WorkerResult>,
+) {
+    spawn("damage-twin-measure", move || {
+        let config = crate::damage::measure::MeasureConfig::default();
+        let measurement = crate::damage::measure::measure_damage(&splats, &cameras, &config);
+        let _ = results.send(WorkerResult::Regions {
+            generation,
+            measurement: Arc::new(measurement),
+        });
+    });
+}
+
 /// Renders the model from `camera` on the CPU reference renderer and writes a PNG.
 pub fn export_png(
     path: PathBuf,

@@ -10,6 +10,7 @@ mod inspect;
 mod launch;
 mod refine;
 mod render;
+mod report;
 mod study;
 mod synth;
 mod train;
@@ -45,6 +46,9 @@ enum Command {
     Refine(refine::Args),
     /// Render one view of a model to a PNG.
     Render(render::Args),
+    /// The inspection report of a twin project: damage regions measured per survey (lengths,
+    /// widths, areas, growth, new regions) as report.html and report.json.
+    Report(report::Args),
     /// Time per training iteration by stage, memory and bytes per Gaussian (JSON).
     Bench(bench::Args),
     /// Milliseconds per frame by stage, GPU (wgpu) and CPU side by side (JSON).
@@ -73,6 +77,7 @@ pub fn main() -> ExitCode {
         Some(Command::Eval(args)) => eval::run(args),
         Some(Command::Refine(args)) => refine::run(args),
         Some(Command::Render(args)) => render::run(args),
+        Some(Command::Report(args)) => report::run(args),
         Some(Command::Bench(args)) => bench::run(args),
         Some(Command::BenchRender(args)) => bench_render::run(args),
         Some(Command::Study(study)) => study::run(study),

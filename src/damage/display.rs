@@ -64,15 +64,19 @@ pub fn render_png(
 
 /// Writes an RGB image as a PNG atomically (temporary file, fsync, rename).
 pub fn save_png(path: &Path, image: &RgbImage) -> Result<(), SceneError> {
-    let mut bytes = Vec::new();
-    image
-        .to_rgb8()
-        .write_to(
-            &mut std::io::Cursor::new(&mut bytes),
-            image::ImageFormat::Png,
-        )
+    let bytes = png_bytes(image)
         .map_err(|e| SceneError::invalid(path, format!("encoding the PNG: {e}")))?;
     write_atomic(path, |w| std::io::Write::write_all(w, &bytes))
+}
+
+/// An RGB image encoded as PNG in memory.
+pub fn png_bytes(image: &RgbImage) -> Result<Vec<u8>, image::ImageError> {
+    let mut bytes = Vec::new();
+    image.to_rgb8().write_to(
+        &mut std::io::Cursor::new(&mut bytes),
+        image::ImageFormat::Png,
+    )?;
+    Ok(bytes)
 }
 
 /// A still to render and write, with optionally the rendered damage masks beside it.

@@ -1,7 +1,8 @@
 //! Display of the damage layer: class colours over the photo-real render. Per pixel on a CPU
 //! render (`composite`), or per Gaussian before rendering or GPU upload (`display_splats`:
 //! blending is linear in colour, so tinting each Gaussian by its label probability matches
-//! tinting the blended label channels). Display only: no evaluation, no thresholds.
+//! tinting the blended label channels), and the selection's tint. Display only: no evaluation,
+//! no thresholds.
 
 use std::borrow::Cow;
 
@@ -9,6 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::scene::DamageClass;
 use crate::splats::Splats;
+use crate::splats::model::state::SELECTED;
 use crate::splats::model::{SH_C0, sigmoid};
 
 /// How the damage layer is drawn (the viewer's settings, `render --damage-layer`).
@@ -84,7 +86,8 @@ pub fn display_splats<'a>(
     let scale_changes =
         splat_scale.is_finite() && splat_scale > 0.0 && (splat_scale - 1.0).abs() > 1e-6;
     let damage = layer.enabled && splats.label_channels > 0;
-    if !scale_changes && !damage {
+    let selected = splats.meta.state.iter().any(|&b| b & SELECTED != 0);
+    if !scale_changes && !damage && !selected {
         return Cow::Borrowed(splats);
     }
     let mut out = splats.clone();
@@ -135,7 +138,29 @@ pub fn display_splats<'a>(
             }
         }
     }
+    if selected {
+        tint_selection(&mut out);
+    }
     Cow::Owned(out)
+}
+
+/// Colour the selection is tinted towards (sRGB), and how far.
+pub const SELECTION_TINT: [u8; 3] = [255, 140, 0];
+const SELECTION_TINT_WEIGHT: f32 = 0.6;
+
+/// Tints the selected Gaussians' base colour towards `SELECTION_TINT`.
+fn tint_selection(out: &mut Splats) {
+    let k_coeffs = out.sh_coeffs();
+    for g in 0..out.len() {
+        if out.meta.state[g] & SELECTED == 0 {
+            continue;
+        }
+        let sh = &mut out.sh[g * k_coeffs * 3..(g + 1) * k_coeffs * 3];
+        for (dc, &target) in sh.iter_mut().zip(&SELECTION_TINT) {
+            let v = SH_C0 * *dc + 0.5;
+            *dc = (v + (unit(target) - v) * SELECTION_TINT_WEIGHT - 0.5) / SH_C0;
+        }
+    }
 }
 
 #[cfg(test)]

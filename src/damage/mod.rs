@@ -1,6 +1,7 @@
 //! Damage: classes and colours, the supervision modes (overlay targets, label channels), reading
-//! rendered damage back and scoring it, and the mask-noise study. Uses the engine; contains no
-//! rendering or optimisation of its own.
+//! rendered damage back and scoring it, measuring it on the surface (`measure`: lengths, widths,
+//! areas), and the mask-noise study. Uses the engine; renders no camera view and optimises
+//! nothing of its own (`measure` splats labels straight onto a surface plane).
 
 pub mod assess;
 pub mod bench;
@@ -10,6 +11,7 @@ pub mod hierarchy;
 pub mod hulls;
 pub mod layer;
 pub mod lift;
+pub mod measure;
 pub mod mode;
 pub mod overlay;
 pub mod palette;

@@ -126,6 +126,9 @@ pub struct ProjectSettings {
     pub new_damage_colour: [u8; 3],
     /// Every n-th image is held out for evaluation (the 3DGS convention is 8).
     pub held_out_every: u32,
+    /// Metres per model unit, once known (`twin set-scale`; a synthetic survey is metric).
+    /// Structure from motion is up to scale: without it, quantities are in model units.
+    pub metres_per_unit: Option<f64>,
 }
 
 impl Default for ProjectSettings {
@@ -135,6 +138,7 @@ impl Default for ProjectSettings {
             scale: ImageScale::Factor(1),
             new_damage_colour: NEW_DAMAGE_COLOUR,
             held_out_every: 8,
+            metres_per_unit: None,
         }
     }
 }

@@ -5,6 +5,7 @@
 pub mod charts;
 pub mod log;
 pub mod project;
+pub mod regions;
 pub mod stats;
 pub mod training;
 pub mod view;
@@ -12,6 +13,7 @@ pub mod view;
 pub use charts::ChartsPanel;
 pub use log::LogPanel;
 pub use project::ProjectPanel;
+pub use regions::RegionsPanel;
 pub use stats::StatsPanel;
 pub use training::TrainingPanel;
 pub use view::ViewPanel;

@@ -5,6 +5,7 @@
 mod add_survey;
 mod detect;
 mod new;
+mod set_scale;
 mod status;
 mod update;
 
@@ -21,6 +22,8 @@ pub enum Twin {
     Update(update::Args),
     /// The project's surveys, models and damage.
     Status(status::Args),
+    /// The project's scale: metres per model unit, from a known distance.
+    SetScale(set_scale::Args),
 }
 
 pub fn run(command: Twin) -> anyhow::Result<()> {
@@ -30,6 +33,7 @@ pub fn run(command: Twin) -> anyhow::Result<()> {
         Twin::Detect(args) => detect::run(args),
         Twin::Update(args) => update::run(args),
         Twin::Status(args) => status::run(args),
+        Twin::SetScale(args) => set_scale::run(args),
     }
 }
 

@@ -1,0 +1,122 @@
+//! `damage-twin report DIR --out R`: the twin project's damage measured per survey (regions,
+//! lengths, widths, areas, growth, new regions) as `R/report.json` and a self-contained
+//! `R/report.html` with renders of the twin.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use anyhow::Context;
+
+use damage_twin::damage::display::{DisplayStyle, png_bytes, render_view};
+use damage_twin::damage::measure::MeasureConfig;
+use damage_twin::report::inspection::{
+    Figure, InspectionReport, ReportSettings, TruthTotals, report_html,
+};
+use damage_twin::scene::atomic::write_atomic;
+use damage_twin::synth::quantities::Quantities;
+use damage_twin::timeline::quantities::survey_quantities;
+use damage_twin::timeline::twin::today;
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The twin project folder.
+    pub dir: PathBuf,
+    /// Folder for report.html and report.json (created).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Renders per survey, from its photos' poses spread over the survey.
+    #[arg(long, default_value_t = 4)]
+    pub views: usize,
+    /// Renders are this many times smaller than the photos.
+    #[arg(long, default_value_t = 2)]
+    pub downscale: u32,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let twin = super::twin::open(&args.dir)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let metres = twin.project.settings.metres_per_unit;
+    let config = MeasureConfig::for_scale(metres.unwrap_or(1.0));
+    let surveys = survey_quantities(&twin)?;
+
+    let mut truth = BTreeMap::new();
+    let mut figures = Vec::new();
+    for s in &surveys {
+        let dataset = twin.open_survey_dataset(&s.survey)?;
+        let truth_file = dataset.root.join("truth").join("quantities.json");
+        if truth_file.is_file() {
+            let text = std::fs::read_to_string(&truth_file)
+                .with_context(|| format!("reading {}", truth_file.display()))?;
+            let q: Quantities = serde_json::from_str(&text)
+                .with_context(|| format!("{}: not a quantities file", truth_file.display()))?;
+            truth.insert(
+                s.survey.clone(),
+                TruthTotals {
+                    crack_length_m: f64::from(q.totals.crack_length_m),
+                    spalling_area_m2: f64::from(q.totals.spalling_area_m2),
+                    rebar_length_m: f64::from(q.totals.rebar_length_m),
+                },
+            );
+        }
+        let Some(splats) = twin.load_model(&s.survey)? else {
+            continue;
+        };
+        let mut style = DisplayStyle {
+            background: twin.project.settings.background.into(),
+            ..DisplayStyle::default()
+        };
+        style.damage.enabled = true;
+        let count = args.views.min(dataset.views.len());
+        for k in 0..count {
+            let view = &dataset.views[k * dataset.views.len() / count];
+            let camera = &view.camera;
+            let d = args.downscale.max(1);
+            let camera = camera.resized(camera.intrinsics.width / d, camera.intrinsics.height / d);
+            let png =
+                png_bytes(&render_view(&splats, &camera, &style)).context("encoding a render")?;
+            figures.push(Figure {
+                caption: format!("survey {}, from {}", s.survey, view.name),
+                png,
+            });
+        }
+        eprintln!(
+            "survey {}: {} regions on {} planes in {:.1} s; crack {:.2}, spalling {:.2}, rebar {:.2}",
+            s.survey,
+            s.regions.len(),
+            s.planes.len(),
+            s.seconds,
+            s.totals.crack_length_m,
+            s.totals.spalling_area_m2,
+            s.totals.rebar_length_m
+        );
+    }
+
+    let settings = ReportSettings {
+        metres_per_unit: metres.unwrap_or(1.0),
+        scale_known: metres.is_some(),
+        label_threshold: config.threshold,
+        map_cell_m: config.cell * metres.unwrap_or(1.0),
+        region_gap_m: config.gap * metres.unwrap_or(1.0),
+        plane_slab_m: config.slab * metres.unwrap_or(1.0),
+    };
+    let report = InspectionReport::new(
+        args.dir.display().to_string(),
+        today(),
+        settings,
+        surveys,
+        truth,
+    );
+    let json = serde_json::to_string_pretty(&report)?;
+    let json_path = args.out.join("report.json");
+    write_atomic(&json_path, |w| {
+        std::io::Write::write_all(w, json.as_bytes())
+    })?;
+    let html_path = args.out.join("report.html");
+    let html = report_html(&report, &figures);
+    write_atomic(&html_path, |w| {
+        std::io::Write::write_all(w, html.as_bytes())
+    })?;
+    println!("wrote {} and {}", html_path.display(), json_path.display());
+    Ok(())
+}
