@@ -118,11 +118,24 @@ impl CameraController {
         self.pose
     }
 
-    /// Eases to orbit `target` at a distance that frames a sphere of `radius` (the view
-    /// direction is kept).
-    pub fn frame_target(&mut self, target: Vec3, radius: f32) {
+    /// Eases to orbit `target` at a distance that frames a sphere of `radius`, looking from
+    /// `from` (a direction from the target to the eye; None keeps the view direction). A
+    /// direction along `up` keeps the yaw.
+    pub fn frame_target(&mut self, target: Vec3, radius: f32, from: Option<Vec3>) {
         self.goal.target = target;
         self.goal.distance = (radius.max(MIN_DISTANCE) / (self.fov_y * 0.5).sin()) * 1.1;
+        if let Some(d) = from.and_then(|d| d.try_normalize()) {
+            let (e1, e2) = self.basis();
+            let pitch = d.dot(self.up).clamp(-1.0, 1.0).asin();
+            let level = d - self.up * d.dot(self.up);
+            if level.length_squared() > 1e-8 {
+                // Keep the eased yaw within half a turn of the current one (no spin).
+                let yaw = level.dot(e2).atan2(level.dot(e1));
+                let turns = ((self.goal.yaw - yaw) / std::f32::consts::TAU).round();
+                self.goal.yaw = yaw + turns * std::f32::consts::TAU;
+            }
+            self.goal.pitch = pitch;
+        }
     }
 
     pub fn goal(&self) -> OrbitPose {

@@ -262,7 +262,10 @@ impl eframe::App for TwinApp {
         egui::CentralPanel::no_frame().show(ui, |ui| {
             self.viewport.ui(ui, &mut self.state, &mut self.commands);
         });
-        if self.demo.is_some() || self.state.training.as_ref().is_some_and(|t| t.is_running()) {
+        if self.demo.is_some()
+            || self.state.measuring
+            || self.state.training.as_ref().is_some_and(|t| t.is_running())
+        {
             // Keep polling the workers while they run (events arrive between input events), as
             // often as snapshots come: on a software driver every UI frame costs CPU time that
             // training needs.

@@ -93,6 +93,8 @@ pub struct AppState {
     pub snap: Option<Snap>,
     /// Damage regions of the model, once measured.
     pub regions: Option<MeasuredRegions>,
+    /// A measurement is running on a worker thread.
+    pub measuring: bool,
     pub log: VecDeque<String>,
     /// Viewport size in pixels, as last laid out (for PNG export at screen size).
     pub viewport_pixels: [u32; 2],
@@ -120,6 +122,7 @@ impl AppState {
             history: History::default(),
             snap: None,
             regions: None,
+            measuring: false,
             log: VecDeque::new(),
             viewport_pixels: [960, 540],
             frame_stats: FrameStats::default(),
@@ -216,6 +219,7 @@ impl AppState {
                 generation,
                 measurement,
             } => {
+                self.measuring = false;
                 self.log_line(format!(
                     "measured {} damage regions on {} planes in {:.1} s",
                     measurement.regions.len(),
@@ -310,6 +314,12 @@ impl AppState {
             model.meta.state[g as usize] |= SELECTED;
         }
         let (centroid, extent) = (region.centroid, region.length.unwrap_or(region.area.sqrt()));
+        // From the photographed side, a little above (the plane's normal faces the cameras).
+        let facing = regions
+            .measurement
+            .planes
+            .get(region.plane)
+            .map(|p| glam::DVec3::from_array(p.normal).as_vec3() + self.camera.up * 0.3);
         let count = region.members.len();
         self.set_splats(Arc::new(model));
         // The selection does not change what was measured.
@@ -320,7 +330,8 @@ impl AppState {
         }
         self.snap = None;
         let target = glam::DVec3::from_array(centroid).as_vec3();
-        self.camera.frame_target(target, (extent as f32).max(0.3));
+        self.camera
+            .frame_target(target, (extent as f32).max(0.3), facing);
         self.log_line(format!("selected region {} ({count} Gaussians)", index + 1));
     }
 
@@ -394,12 +405,16 @@ impl AppState {
             }
             Command::SnapToView(index) => self.snap_to(index),
             Command::MeasureRegions => match &self.splats {
-                Some(splats) => workers::measure_regions(
-                    splats.clone(),
-                    self.splats_generation,
-                    self.survey_cameras(),
-                    self.results_sender(),
-                ),
+                Some(splats) if !self.measuring => {
+                    self.measuring = true;
+                    workers::measure_regions(
+                        splats.clone(),
+                        self.splats_generation,
+                        self.survey_cameras(),
+                        self.results_sender(),
+                    );
+                }
+                Some(_) => self.log_line("already measuring"),
                 None => self.log_line("nothing to measure yet: no model"),
             },
             Command::FocusRegion(index) => self.focus_region(index),

@@ -61,6 +61,8 @@ enum Command {
     Twin(twin::Twin),
     /// The built-in demo building: the app, or with --headless synth + train + eval + charts.
     Demo(demo::Args),
+    /// The app on a dataset, a twin project or a PLY model.
+    Open(launch::OpenArgs),
 }
 
 pub fn main() -> ExitCode {
@@ -83,6 +85,7 @@ pub fn main() -> ExitCode {
         Some(Command::Study(study)) => study::run(study),
         Some(Command::Twin(command)) => twin::run(command),
         Some(Command::Demo(args)) => demo::run(args),
+        Some(Command::Open(args)) => launch::open_window(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

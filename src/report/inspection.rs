@@ -263,8 +263,10 @@ fn growth_chart(report: &InspectionReport) -> String {
         ("spalled area", "#e8a", |s| s.totals.spalling_area_m2),
         ("rebar length", "#cc3", |s| s.totals.rebar_length_m),
     ];
-    let mut h = String::from(
-        "<h2>Between surveys</h2><svg xmlns=\"http://www.w3.org/2000/svg\" width=\"720\" height=\"200\" role=\"img\" aria-label=\"totals per survey\">",
+    let height = 36 + 24 * report.surveys.len();
+    let mut h = format!(
+        "<h2>Between surveys</h2><svg xmlns=\"http://www.w3.org/2000/svg\" width=\"720\" \
+         height=\"{height}\" role=\"img\" aria-label=\"totals per survey\">"
     );
     for (i, (name, colour, value)) in series.iter().enumerate() {
         let max = report.surveys.iter().map(value).fold(1e-9, f64::max);

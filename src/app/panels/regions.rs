@@ -12,10 +12,16 @@ impl RegionsPanel {
     pub fn ui(&mut self, ui: &mut egui::Ui, state: &AppState, commands: &mut Vec<Command>) {
         ui.horizontal(|ui| {
             let measure = ui
-                .add_enabled(state.splats.is_some(), egui::Button::new("Measure damage"))
+                .add_enabled(
+                    state.splats.is_some() && !state.measuring,
+                    egui::Button::new("Measure damage"),
+                )
                 .on_hover_text("Regions per class on the surface, with lengths and areas");
             if measure.clicked() {
                 commands.push(Command::MeasureRegions);
+            }
+            if state.measuring {
+                ui.spinner();
             }
             if let Some(r) = &state.regions
                 && r.generation != state.splats_generation
