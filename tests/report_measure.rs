@@ -152,6 +152,7 @@ fn report_json_follows_its_documented_schema() {
             class: r.class,
             centroid_m: r.centroid,
             height_m: r.centroid[2],
+            component: Some("wall".into()),
             length_m: r.length,
             width_m: r.width,
             area_m2: r.area,

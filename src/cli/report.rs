@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 
 use damage_twin::damage::display::{DisplayStyle, png_bytes, render_view};
+use damage_twin::damage::layer::display_by_survey;
 use damage_twin::damage::measure::MeasureConfig;
 use damage_twin::report::inspection::{
     Figure, InspectionReport, ReportSettings, TruthTotals, report_html,
@@ -32,6 +33,16 @@ pub struct Args {
     pub downscale: u32,
 }
 
+/// Damage first seen before the latest survey, in the by-survey renders.
+const EARLIER_DAMAGE: [u8; 3] = [70, 130, 255];
+
+fn colour_name(colour: [u8; 3]) -> String {
+    match colour {
+        [0, 255, 0] => "green".to_string(),
+        [r, g, b] => format!("#{r:02x}{g:02x}{b:02x}"),
+    }
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     let twin = super::twin::open(&args.dir)?;
     std::fs::create_dir_all(&args.out)
@@ -40,6 +51,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let config = MeasureConfig::for_scale(metres.unwrap_or(1.0));
     let surveys = survey_quantities(&twin)?;
 
+    // Earlier surveys' damage blue, the latest survey's in the project's new-damage colour.
+    let latest_colour = twin.project.settings.new_damage_colour;
+    let latest = twin
+        .project
+        .surveys
+        .last()
+        .map(|s| s.name.clone())
+        .unwrap_or_default();
+    let mut survey_colours = vec![EARLIER_DAMAGE; twin.project.surveys.len().saturating_sub(1)];
+    survey_colours.push(latest_colour);
     let mut truth = BTreeMap::new();
     let mut figures = Vec::new();
     for s in &surveys {
@@ -67,6 +88,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ..DisplayStyle::default()
         };
         style.damage.enabled = true;
+        let by_survey = display_by_survey(&splats, &survey_colours);
+        let mut plain = style.clone();
+        plain.damage.enabled = false;
         let count = args.views.min(dataset.views.len());
         for k in 0..count {
             let view = &dataset.views[k * dataset.views.len() / count];
@@ -76,9 +100,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let png =
                 png_bytes(&render_view(&splats, &camera, &style)).context("encoding a render")?;
             figures.push(Figure {
-                caption: format!("survey {}, from {}", s.survey, view.name),
+                caption: format!("survey {}, from {}: by class", s.survey, view.name),
                 png,
             });
+            // Damage by survey for half the views (earlier surveys blue, the latest its colour).
+            if k % 2 == 0 {
+                let png = png_bytes(&render_view(&by_survey, &camera, &plain))
+                    .context("encoding a render")?;
+                figures.push(Figure {
+                    caption: format!(
+                        "survey {}, from {}: by survey (blue earlier, {} {latest})",
+                        s.survey,
+                        view.name,
+                        colour_name(latest_colour),
+                    ),
+                    png,
+                });
+            }
         }
         eprintln!(
             "survey {}: {} regions on {} planes in {:.1} s; crack {:.2}, spalling {:.2}, rebar {:.2}",

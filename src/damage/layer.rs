@@ -144,6 +144,41 @@ pub fn display_splats<'a>(
     Cow::Owned(out)
 }
 
+/// The model with its damage coloured by the survey it was first seen in (`survey_colours`
+/// indexed by `damage_survey`; the last colour for any later index) and the rest greyed: each
+/// Gaussian's colour goes to its survey's colour by its highest class probability. View-dependent
+/// colour is dropped.
+pub fn display_by_survey(splats: &Splats, survey_colours: &[[u8; 3]]) -> Splats {
+    use crate::splats::model::NO_SURVEY;
+    let mut out = splats.clone();
+    let k_coeffs = out.sh_coeffs();
+    let channels = out.label_channels;
+    for g in 0..out.len() {
+        let sh = &mut out.sh[g * k_coeffs * 3..(g + 1) * k_coeffs * 3];
+        let grey = 0.25 * (SH_C0 * (sh[0] + sh[1] + sh[2]) / 3.0 + 0.5);
+        let mut rgb = [grey; 3];
+        let survey = splats.meta.damage_survey[g];
+        if survey != NO_SURVEY && channels > 0 && !survey_colours.is_empty() {
+            let colour = survey_colours[usize::from(survey).min(survey_colours.len() - 1)];
+            let w = splats.raw_labels[g * channels..(g + 1) * channels]
+                .iter()
+                .take(DamageClass::ALL.len())
+                .map(|&l| sigmoid(l))
+                .fold(0.0f32, f32::max);
+            for (v, &target) in rgb.iter_mut().zip(&colour) {
+                *v += (unit(target) - *v) * w;
+            }
+        }
+        for (dc, v) in sh.iter_mut().zip(rgb) {
+            *dc = (v - 0.5) / SH_C0;
+        }
+        for v in &mut sh[3..] {
+            *v = 0.0;
+        }
+    }
+    out
+}
+
 /// Colour the selection is tinted towards (sRGB), and how far.
 pub const SELECTION_TINT: [u8; 3] = [255, 140, 0];
 const SELECTION_TINT_WEIGHT: f32 = 0.6;

@@ -96,10 +96,10 @@ h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-to
 table{border-collapse:collapse;margin:.6em 0;font-size:.9em}\
 td,th{border:1px solid #ccc;padding:.25em .6em;text-align:right}th{background:#f2f2f2}\
 td.l,th.l{text-align:left}.new{color:#0a0;font-weight:600}.warn{color:#a60}\
-.figs{display:flex;flex-wrap:wrap;gap:.8em}figure{margin:0}figure img{width:22em;border:1px solid #ccc}\
+.figs{display:flex;flex-wrap:wrap;gap:.8em}figure{margin:0}figure{max-width:22em}figure img{width:22em;border:1px solid #ccc}\
 figcaption{font-size:.8em;color:#555}\
 @media print{body{margin:0;max-width:none}h2{break-after:avoid}table,figure{break-inside:avoid}\
-figure img{width:17em}}";
+figure{max-width:17em}figure img{width:17em}}";
 
 /// The page.
 pub fn report_html(report: &InspectionReport, figures: &[Figure]) -> String {
@@ -183,7 +183,7 @@ pub fn report_html(report: &InspectionReport, figures: &[Figure]) -> String {
     }
     h.push_str(&growth_chart(report));
     if !figures.is_empty() {
-        h.push_str("<h2>The twin</h2><p>Damage coloured by class: crack red, spalling pink, rebar yellow.</p><div class=\"figs\">");
+        h.push_str("<h2>The twin</h2><p>Damage coloured by class (crack red, spalling pink, rebar yellow) and by the survey it was first seen in.</p><div class=\"figs\">");
         for f in figures {
             let _ = write!(
                 h,
@@ -212,7 +212,7 @@ pub fn report_html(report: &InspectionReport, figures: &[Figure]) -> String {
 
 fn regions_table(regions: &[ReportRegion], unit: &str) -> String {
     let mut h = format!(
-        "<table><tr><th class=\"l\">Region</th><th class=\"l\">Class</th><th>Centroid x, y, z ({unit})</th>\
+        "<table><tr><th class=\"l\">Region</th><th class=\"l\">Class</th><th>Centroid x, y, z ({unit})</th><th class=\"l\">Component</th>\
          <th>Length</th><th>Mean width</th><th>Area ({unit}²)</th><th class=\"l\">First seen</th>\
          <th>Growth</th><th class=\"l\">Previous</th></tr>"
     );
@@ -227,13 +227,14 @@ fn regions_table(regions: &[ReportRegion], unit: &str) -> String {
         };
         let _ = write!(
             h,
-            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{:.2}, {:.2}, {:.2}</td><td>{}</td>\
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{:.2}, {:.2}, {:.2}</td><td class=\"l\">{}</td><td>{}</td>\
              <td>{}</td><td>{:.3}</td><td class=\"l\">{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
             escape(&r.id),
             r.class.id(),
             r.centroid_m[0],
             r.centroid_m[1],
             r.centroid_m[2],
+            escape(r.component.as_deref().unwrap_or("–")),
             opt(r.length_m, 1.0, 2),
             r.width_m.map_or("–".to_string(), |w| {
                 if unit == "m" {

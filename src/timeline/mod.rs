@@ -7,6 +7,7 @@
 pub mod align;
 pub mod appearance;
 pub mod changes;
+pub mod components;
 pub mod earlier;
 pub mod quantities;
 pub mod survey;

@@ -4,6 +4,7 @@
 
 use serde::Serialize;
 
+use super::components::components_at;
 use super::twin::{TimelineError, Twin};
 use crate::damage::DamageClass;
 use crate::damage::measure::{
@@ -21,6 +22,8 @@ pub struct ReportRegion {
     /// The centroid's z in metres: its height where the twin frame has z up and the ground at
     /// z = 0 (the demo building does).
     pub height_m: f64,
+    /// The building component under the centroid, where the dataset labels components.
+    pub component: Option<String>,
     pub length_m: Option<f64>,
     pub width_m: Option<f64>,
     pub area_m2: f64,
@@ -75,21 +78,24 @@ pub fn survey_quantities(twin: &Twin) -> Result<Vec<SurveyQuantities>, TimelineE
     // side of each surface is outside (a later survey may not photograph every facade).
     let mut cameras: Vec<Camera> = Vec::new();
     for (index, name) in names.iter().enumerate() {
-        cameras.extend(
-            twin.open_survey_dataset(name)?
-                .views
-                .into_iter()
-                .map(|v| v.camera),
-        );
+        let dataset = twin.open_survey_dataset(name)?;
+        cameras.extend(dataset.views.iter().map(|v| v.camera));
         let Some(splats) = twin.load_model(name)? else {
             continue;
         };
         let measurement = measure_damage(&splats, &cameras, &config);
+        let centroids: Vec<glam::DVec3> = measurement
+            .regions
+            .iter()
+            .map(|r| glam::DVec3::from_array(r.centroid))
+            .collect();
+        let components = components_at(&dataset, &centroids, metres);
         let regions = report_regions(
             name,
             &names,
             &measurement,
             previous.as_ref().map(|(n, m)| (n.as_str(), m)),
+            &components,
             metres,
         );
         let survey = &twin.project.surveys[index];
@@ -138,6 +144,7 @@ fn report_regions(
     survey_names: &[String],
     measurement: &Measurement,
     previous: Option<(&str, &Measurement)>,
+    components: &[Option<String>],
     metres: f64,
 ) -> Vec<ReportRegion> {
     let own_ids = ids(survey, measurement);
@@ -146,7 +153,8 @@ fn report_regions(
         .regions
         .iter()
         .zip(own_ids)
-        .map(|(region, id)| {
+        .zip(components)
+        .map(|((region, id), component)| {
             let matched: Vec<usize> = previous
                 .map(|(_, m)| {
                     (0..m.regions.len())
@@ -171,6 +179,7 @@ fn report_regions(
                 class: region.class,
                 centroid_m: region.centroid.map(|c| c * metres),
                 height_m: region.centroid[2] * metres,
+                component: component.clone(),
                 length_m: region.length.map(|l| l * metres),
                 width_m: region.width.map(|w| w * metres),
                 area_m2: region.area * metres * metres,
