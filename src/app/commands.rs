@@ -52,4 +52,20 @@ pub enum Command {
     MeasureRegions,
     /// Select region `index` of the last measurement (its damage Gaussians) and frame it.
     FocusRegion(usize),
+    /// Combine the Gaussians inside `shape` (screen shapes in pixels of `camera`) with the
+    /// selection.
+    Select {
+        shape: crate::splats::selection::Shape,
+        camera: Box<crate::scene::Camera>,
+        op: crate::splats::selection::SetOp,
+    },
+    SelectAll,
+    SelectNone,
+    InvertSelection,
+    /// Hide the selection (neither drawn nor selectable until unhidden).
+    HideSelected,
+    UnhideAll,
+    /// Undo or redo the last selection or visibility edit.
+    Undo,
+    Redo,
 }

@@ -14,6 +14,7 @@ pub mod scene_frame;
 pub mod settings;
 pub mod splat_view;
 pub mod state;
+pub mod tools;
 pub mod training;
 pub mod viewport;
 pub mod workers;
@@ -164,6 +165,27 @@ impl TwinApp {
                 i.consume_key(egui::Modifiers::NONE, egui::Key::F),
             )
         });
+        if !ctx.egui_wants_keyboard_input() {
+            let shift_command = egui::Modifiers::SHIFT | egui::Modifiers::COMMAND;
+            // Longer chords first: consume_key matches modifiers exactly.
+            for (modifiers, key, command) in [
+                (shift_command, egui::Key::A, Command::SelectNone),
+                (egui::Modifiers::COMMAND, egui::Key::A, Command::SelectAll),
+                (
+                    egui::Modifiers::COMMAND,
+                    egui::Key::I,
+                    Command::InvertSelection,
+                ),
+                (shift_command, egui::Key::Z, Command::Redo),
+                (egui::Modifiers::COMMAND, egui::Key::Z, Command::Undo),
+                (egui::Modifiers::SHIFT, egui::Key::H, Command::UnhideAll),
+                (egui::Modifiers::NONE, egui::Key::H, Command::HideSelected),
+            ] {
+                if ctx.input_mut(|i| i.consume_key(modifiers, key)) {
+                    self.commands.push(command);
+                }
+            }
+        }
         if open {
             self.commands
                 .push(Command::ShowDialog(DialogKind::OpenFolder));

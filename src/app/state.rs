@@ -18,6 +18,7 @@ use crate::app::workers;
 use crate::damage::measure::Measurement;
 use crate::scene::{Camera, Dataset, RgbImage};
 use crate::splats::Splats;
+use crate::splats::selection::{self, Edit, EditHistory, SetOp};
 use crate::timeline::Twin;
 use crate::train::history::History;
 
@@ -95,6 +96,8 @@ pub struct AppState {
     pub regions: Option<MeasuredRegions>,
     /// A measurement is running on a worker thread.
     pub measuring: bool,
+    /// Selection and visibility edits of the model on screen, for undo and redo.
+    pub edits: EditHistory,
     pub log: VecDeque<String>,
     /// Viewport size in pixels, as last laid out (for PNG export at screen size).
     pub viewport_pixels: [u32; 2],
@@ -123,6 +126,7 @@ impl AppState {
             snap: None,
             regions: None,
             measuring: false,
+            edits: EditHistory::default(),
             log: VecDeque::new(),
             viewport_pixels: [960, 540],
             frame_stats: FrameStats::default(),
@@ -147,10 +151,61 @@ impl AppState {
         self.log.push_back(line);
     }
 
-    /// Replaces the model on screen.
+    /// Replaces the model on screen (edits of the one before cannot be undone on it).
     pub fn set_splats(&mut self, splats: Arc<Splats>) {
+        self.edits.clear();
+        self.show_edited(splats);
+    }
+
+    fn show_edited(&mut self, splats: Arc<Splats>) {
         self.splats = Some(splats);
         self.splats_generation += 1;
+    }
+
+    /// Applies a selection or visibility edit to the model on screen, undoably; a measurement of
+    /// the model stays current (no geometry changed).
+    fn edit_model(&mut self, edit: impl FnOnce(&mut Splats) -> Edit) {
+        let Some(splats) = &self.splats else {
+            self.log_line("nothing to select yet: no model");
+            return;
+        };
+        let mut model = Splats::clone(splats);
+        let change = edit(&mut model);
+        if change.is_empty() {
+            return;
+        }
+        self.edits.push(change);
+        self.show_model_keeping_measurement(model);
+    }
+
+    fn show_model_keeping_measurement(&mut self, model: Splats) {
+        let current = self
+            .regions
+            .as_ref()
+            .is_some_and(|r| r.generation == self.splats_generation);
+        self.show_edited(Arc::new(model));
+        if current && let Some(r) = &mut self.regions {
+            r.generation = self.splats_generation;
+        }
+    }
+
+    fn undo_redo(&mut self, redo: bool) {
+        let Some(splats) = &self.splats else { return };
+        let mut model = Splats::clone(splats);
+        let done = if redo {
+            self.edits.redo(&mut model)
+        } else {
+            self.edits.undo(&mut model)
+        };
+        if done {
+            self.show_model_keeping_measurement(model);
+        } else {
+            self.log_line(if redo {
+                "nothing to redo"
+            } else {
+                "nothing to undo"
+            });
+        }
     }
 
     /// Survey cameras of the open dataset.
@@ -294,7 +349,6 @@ impl AppState {
 
     /// Selects region `index`'s damage Gaussians (only those) and frames it.
     fn focus_region(&mut self, index: usize) {
-        use crate::splats::model::state::SELECTED;
         let (Some(regions), Some(splats)) = (&self.regions, &self.splats) else {
             return;
         };
@@ -306,13 +360,6 @@ impl AppState {
             self.log_line("the model changed since it was measured: measure again");
             return;
         }
-        let mut model = Splats::clone(splats);
-        for bits in &mut model.meta.state {
-            *bits &= !SELECTED;
-        }
-        for &g in &region.members {
-            model.meta.state[g as usize] |= SELECTED;
-        }
         let (centroid, extent) = (region.centroid, region.length.unwrap_or(region.area.sqrt()));
         // From the photographed side, a little above (the plane's normal faces the cameras).
         let facing = regions
@@ -321,13 +368,11 @@ impl AppState {
             .get(region.plane)
             .map(|p| glam::DVec3::from_array(p.normal).as_vec3() + self.camera.up * 0.3);
         let count = region.members.len();
-        self.set_splats(Arc::new(model));
-        // The selection does not change what was measured.
-        if let Some(r) = &mut self.regions
-            && !stale
-        {
-            r.generation = self.splats_generation;
+        let mut hit = vec![false; splats.len()];
+        for &g in &region.members {
+            hit[g as usize] = true;
         }
+        self.edit_model(|m| selection::select(m, &hit, SetOp::Set));
         self.snap = None;
         let target = glam::DVec3::from_array(centroid).as_vec3();
         self.camera
@@ -418,6 +463,19 @@ impl AppState {
                 None => self.log_line("nothing to measure yet: no model"),
             },
             Command::FocusRegion(index) => self.focus_region(index),
+            Command::Select { shape, camera, op } => {
+                self.edit_model(|m| {
+                    let hit = selection::hits(m, &camera, &shape);
+                    selection::select(m, &hit, op)
+                });
+            }
+            Command::SelectAll => self.edit_model(|m| selection::select_all(m, true)),
+            Command::SelectNone => self.edit_model(|m| selection::select_all(m, false)),
+            Command::InvertSelection => self.edit_model(selection::invert),
+            Command::HideSelected => self.edit_model(selection::hide_selected),
+            Command::UnhideAll => self.edit_model(selection::unhide_all),
+            Command::Undo => self.undo_redo(false),
+            Command::Redo => self.undo_redo(true),
             Command::Unsnap => {
                 if let Some(snap) = self.snap.take() {
                     self.camera.snap_to(&snap.camera);

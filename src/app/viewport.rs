@@ -16,7 +16,9 @@ use crate::app::settings::CompareMode;
 use crate::app::settings::ViewportRenderer;
 use crate::app::splat_view::SplatView;
 use crate::app::state::{AppState, Photo};
+use crate::app::tools::ToolState;
 use crate::scene::{Camera, RgbImage};
+use crate::splats::selection::SetOp;
 
 /// Frame statistics the statistics panel shows.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -51,6 +53,8 @@ pub struct Viewport {
     rendered_last_frame: bool,
     /// The CPU renderer's worker, started on first use (software drivers, or by choice).
     cpu_view: Option<Result<CpuView, String>>,
+    /// The selection tool and the shape being drawn.
+    pub tools: ToolState,
 }
 
 /// With `DAMAGE_TWIN_FRAME_STATS=1`, prints frame-time statistics every 5 s to stderr (how the
@@ -237,6 +241,11 @@ impl Viewport {
         painter.rect_filled(full, 0.0, bg32);
 
         let mut input = camera_input(ui, &response, full.height());
+        if self.tools.tool.is_some() && response.dragged_by(egui::PointerButton::Primary) {
+            // The primary button draws the selection (Shift and Ctrl pick its set operation).
+            input.rotate = Vec2::ZERO;
+            input.pan = Vec2::ZERO;
+        }
         if state.settings.turntable && state.snap.is_none() && input.rotate == Vec2::ZERO {
             // 0.35 rad/s about the up axis, expressed as the drag that would do it.
             input.rotate.x = -0.35 * input.dt / state.camera.rotate_speed;
@@ -380,8 +389,25 @@ impl Viewport {
             render_rect.height().max(1.0) as u32,
         );
         self.draw_overlays(&painter, render_rect, &overlay_camera, state);
+        self.tools.keys(ui.ctx(), &overlay_camera, commands);
+        let op = ui.input(|i| SetOp::from_modifiers(i.modifiers.shift, i.modifiers.command));
+        let tool_used =
+            self.tools
+                .pointer(&response, render_rect.min, &overlay_camera, op, commands);
+        self.tools
+            .draw(&painter, render_rect.min, response.hover_pos());
+        if let Some(tool) = self.tools.tool {
+            painter.text(
+                render_rect.left_top() + egui::vec2(8.0, 8.0),
+                egui::Align2::LEFT_TOP,
+                format!("{} tool · Esc leaves", tool.name()),
+                egui::FontId::proportional(13.0),
+                egui::Color32::from_rgb(255, 140, 0),
+            );
+        }
 
-        if response.clicked()
+        if !tool_used
+            && response.clicked()
             && let Some(pos) = response.interact_pointer_pos()
             && state.settings.show_frusta
             && let Some(scene) = &state.scene

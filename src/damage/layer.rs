@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::scene::DamageClass;
 use crate::splats::Splats;
-use crate::splats::model::state::SELECTED;
+use crate::splats::model::state::{DELETED, HIDDEN, SELECTED};
 use crate::splats::model::{SH_C0, sigmoid};
 
 /// How the damage layer is drawn (the viewer's settings, `render --damage-layer`).
@@ -87,7 +87,12 @@ pub fn display_splats<'a>(
         splat_scale.is_finite() && splat_scale > 0.0 && (splat_scale - 1.0).abs() > 1e-6;
     let damage = layer.enabled && splats.label_channels > 0;
     let selected = splats.meta.state.iter().any(|&b| b & SELECTED != 0);
-    if !scale_changes && !damage && !selected {
+    let hidden = splats
+        .meta
+        .state
+        .iter()
+        .any(|&b| b & (HIDDEN | DELETED) != 0);
+    if !scale_changes && !damage && !selected && !hidden {
         return Cow::Borrowed(splats);
     }
     let mut out = splats.clone();
@@ -140,6 +145,14 @@ pub fn display_splats<'a>(
     }
     if selected {
         tint_selection(&mut out);
+    }
+    if hidden {
+        // Hidden and (soft-)deleted Gaussians stay in the model but draw nothing.
+        for (opacity, &bits) in out.raw_opacities.iter_mut().zip(&splats.meta.state) {
+            if bits & (HIDDEN | DELETED) != 0 {
+                *opacity = -30.0;
+            }
+        }
     }
     Cow::Owned(out)
 }

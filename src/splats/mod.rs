@@ -3,6 +3,7 @@
 
 pub mod init;
 pub mod model;
+pub mod selection;
 pub mod sh;
 
 pub use model::{MAX_LABEL_CHANNELS, SplatMeta, Splats};
