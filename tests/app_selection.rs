@@ -339,3 +339,80 @@ fn selection_and_hidden_bits_survive_a_ply_save_and_reload() {
     let back = damage_twin::scene::ply::read_splats(&path).unwrap();
     assert_eq!(back.meta.state, s.meta.state);
 }
+
+/// Selecting by damage class and survey, then marking a class by hand: undoable, and kept in
+/// the saved PLY.
+#[test]
+fn damage_selection_and_hand_labels_undo_and_save() {
+    use damage_twin::app::commands::Command;
+    use damage_twin::app::state::AppState;
+    use damage_twin::damage::DamageClass;
+    use damage_twin::splats::selection::{LABEL_ON, SetOp};
+
+    let mut s = Splats::empty(0, 3);
+    for g in 0..10u64 {
+        s.means.push(Vec3::new(g as f32 * 0.1, 0.0, 0.0));
+        s.log_scales.push(Vec3::splat(-3.0));
+        s.rotations.push(Quat::IDENTITY);
+        s.raw_opacities.push(2.0);
+        s.sh.extend_from_slice(&[0.0; 3]);
+        // Gaussians 0..4 crack (4 of them first seen in survey 2), the rest nothing.
+        let crack = if g < 4 { 3.0 } else { -3.0 };
+        s.raw_labels.extend_from_slice(&[crack, -3.0, -3.0]);
+        s.meta.push(g, 0);
+        if g < 4 {
+            s.meta.damage_survey[g as usize] = u16::from(g == 3);
+        }
+    }
+    let mut state = AppState::new(Settings::default());
+    state.set_splats(Arc::new(s));
+    let selected = |state: &AppState| {
+        let s = state.splats.as_ref().unwrap();
+        (0..s.len() as u32)
+            .filter(|&g| s.meta.state[g as usize] & SELECTED != 0)
+            .collect::<Vec<u32>>()
+    };
+    let select_crack = |survey| Command::SelectDamage {
+        class: DamageClass::Crack,
+        threshold: 0.5,
+        survey,
+        op: SetOp::Set,
+    };
+    state.apply(select_crack(None));
+    assert_eq!(selected(&state), [0, 1, 2, 3]);
+    state.apply(select_crack(Some(1)));
+    assert_eq!(selected(&state), [3]);
+    state.apply(select_crack(None));
+    state.apply(Command::SetDamageClass {
+        class: DamageClass::Spalling,
+        on: true,
+    });
+    let spalling = |state: &AppState| {
+        let s = state.splats.as_ref().unwrap();
+        (0..s.len())
+            .map(|g| s.labels_of(g)[1])
+            .collect::<Vec<f32>>()
+    };
+    let marked = spalling(&state);
+    assert!(marked[..4].iter().all(|&l| l == LABEL_ON) && marked[4..].iter().all(|&l| l == -3.0));
+    state.apply(Command::Undo);
+    assert!(
+        spalling(&state).iter().all(|&l| l == -3.0),
+        "undo restores the labels"
+    );
+    state.apply(Command::Redo);
+    assert_eq!(spalling(&state), marked);
+    // Cleared by hand: the crack class off on Gaussian 0..4.
+    state.apply(Command::SetDamageClass {
+        class: DamageClass::Crack,
+        on: false,
+    });
+    state.apply(select_crack(None));
+    assert!(selected(&state).is_empty());
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("model.ply");
+    let model = state.splats.as_ref().unwrap();
+    damage_twin::scene::ply::write_splats(&path, model).unwrap();
+    let back = damage_twin::scene::ply::read_splats(&path).unwrap();
+    assert_eq!(back.raw_labels, model.raw_labels);
+}

@@ -65,7 +65,20 @@ pub enum Command {
     /// Hide the selection (neither drawn nor selectable until unhidden).
     HideSelected,
     UnhideAll,
-    /// Undo or redo the last selection or visibility edit.
+    /// Combine the visible Gaussians of damage class `class` at `threshold` or more (first seen
+    /// in `survey`, when given) with the selection.
+    SelectDamage {
+        class: crate::damage::DamageClass,
+        threshold: f32,
+        survey: Option<u16>,
+        op: crate::splats::selection::SetOp,
+    },
+    /// Set (or clear) damage class `class` on the selection: a person overruling the segmenter.
+    SetDamageClass {
+        class: crate::damage::DamageClass,
+        on: bool,
+    },
+    /// Undo or redo the last selection, visibility or damage-class edit.
     Undo,
     Redo,
 }

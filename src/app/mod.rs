@@ -25,7 +25,8 @@ use std::sync::Arc;
 use crate::app::commands::{Command, DialogKind};
 use crate::app::demo::DemoPreparation;
 use crate::app::panels::{
-    ChartsPanel, LogPanel, ProjectPanel, RegionsPanel, StatsPanel, TrainingPanel, ViewPanel,
+    ChartsPanel, LogPanel, ProjectPanel, RegionsPanel, SelectionPanel, StatsPanel, TrainingPanel,
+    ViewPanel,
 };
 use crate::app::settings::Settings;
 use crate::app::state::AppState;
@@ -84,6 +85,7 @@ pub struct TwinApp {
     training: TrainingPanel,
     view: ViewPanel,
     stats: StatsPanel,
+    selection: SelectionPanel,
     regions: RegionsPanel,
     charts: ChartsPanel,
     log: LogPanel,
@@ -111,6 +113,7 @@ impl TwinApp {
             training: TrainingPanel,
             view: ViewPanel,
             stats: StatsPanel,
+            selection: SelectionPanel::default(),
             regions: RegionsPanel,
             charts: ChartsPanel,
             log: LogPanel,
@@ -263,6 +266,9 @@ impl eframe::App for TwinApp {
                     egui::CollapsingHeader::new("Statistics")
                         .default_open(true)
                         .show(ui, |ui| self.stats.ui(ui, state, commands));
+                    egui::CollapsingHeader::new("Selection")
+                        .default_open(false)
+                        .show(ui, |ui| self.selection.ui(ui, state, commands));
                     egui::CollapsingHeader::new("Damage regions")
                         .default_open(false)
                         .show(ui, |ui| self.regions.ui(ui, state, commands));

@@ -1,8 +1,9 @@
 //! Selecting Gaussians by hand: screen shapes (rectangle, lasso or polygon, brush circle) tested
-//! against each Gaussian's projected centre, and world volumes (sphere, box); the result combined
-//! with the current selection by a set operation. Every change of a state bit is an `Edit`, the
-//! list of Gaussians whose bit flipped: applying it again undoes it, so undo and redo keep no
-//! copy of the model (DESIGN.md: state as bits per Gaussian).
+//! against each Gaussian's projected centre, world volumes (sphere, box), or damage (class above a
+//! probability, survey first seen); the result combined with the current selection by a set
+//! operation; and a person's damage class set or cleared on the selection. Every change is an
+//! `Edit` that undoes itself when applied again (bits flipped, label values swapped), so undo and
+//! redo keep no copy of the model (DESIGN.md: state as bits per Gaussian).
 
 use glam::{Vec2, Vec3};
 
@@ -139,24 +140,95 @@ pub fn hits(splats: &Splats, camera: &Camera, shape: &Shape) -> Vec<bool> {
         .collect()
 }
 
-/// Gaussians whose `bit` flipped. Applying an edit flips them back: it is its own inverse.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct Edit {
-    pub bit: u8,
-    pub flipped: Vec<u32>,
+/// A change to the model that undoes itself when applied again: state bits flipped, or label
+/// values swapped with the ones it holds.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Edit {
+    /// Gaussians whose `bit` flipped.
+    Bits { bit: u8, flipped: Vec<u32> },
+    /// Gaussians whose raw labels were replaced; `labels` holds the other values
+    /// (`label_channels` per Gaussian), swapped in and out by `apply`.
+    Labels {
+        gaussians: Vec<u32>,
+        labels: Vec<f32>,
+    },
 }
 
 impl Edit {
     pub fn is_empty(&self) -> bool {
-        self.flipped.is_empty()
-    }
-
-    /// Flips the bit of every listed Gaussian (applies or undoes the edit).
-    pub fn apply(&self, splats: &mut Splats) {
-        for &g in &self.flipped {
-            splats.meta.state[g as usize] ^= self.bit;
+        match self {
+            Edit::Bits { flipped, .. } => flipped.is_empty(),
+            Edit::Labels { gaussians, .. } => gaussians.is_empty(),
         }
     }
+
+    /// Applies the edit, or undoes it when it was applied last.
+    pub fn apply(&mut self, splats: &mut Splats) {
+        match self {
+            Edit::Bits { bit, flipped } => {
+                for &g in flipped.iter() {
+                    splats.meta.state[g as usize] ^= *bit;
+                }
+            }
+            Edit::Labels { gaussians, labels } => {
+                let c = splats.label_channels;
+                for (k, &g) in gaussians.iter().enumerate() {
+                    let g = g as usize;
+                    splats.raw_labels[g * c..(g + 1) * c]
+                        .swap_with_slice(&mut labels[k * c..(k + 1) * c]);
+                }
+            }
+        }
+    }
+}
+
+/// A label logit a person's "this is damage" sets (probability 0.9975), and its opposite.
+pub const LABEL_ON: f32 = 6.0;
+pub const LABEL_OFF: f32 = -6.0;
+
+/// Sets (`on`) or clears damage class channel `channel` on the selected Gaussians: a person
+/// overruling the segmenter. Nothing happens on a model without that channel.
+pub fn set_label(splats: &mut Splats, channel: usize, on: bool) -> Edit {
+    let c = splats.label_channels;
+    let value = if on { LABEL_ON } else { LABEL_OFF };
+    let gaussians: Vec<u32> = if channel < c {
+        (0..splats.len())
+            .filter(|&g| {
+                splats.meta.state[g] & SELECTED != 0 && splats.raw_labels[g * c + channel] != value
+            })
+            .map(|g| g as u32)
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let mut labels = Vec::with_capacity(gaussians.len() * c);
+    for &g in &gaussians {
+        let mut row = splats.labels_of(g as usize).to_vec();
+        row[channel] = value;
+        labels.extend_from_slice(&row);
+    }
+    let mut edit = Edit::Labels { gaussians, labels };
+    edit.apply(splats);
+    edit
+}
+
+/// Per Gaussian: visible, with class channel `channel` at `threshold` or more (and, with
+/// `survey`, first seen as damage in that survey).
+pub fn damage_hits(
+    splats: &Splats,
+    channel: usize,
+    threshold: f32,
+    survey: Option<u16>,
+) -> Vec<bool> {
+    let c = splats.label_channels;
+    (0..splats.len())
+        .map(|g| {
+            splats.meta.state[g] & (HIDDEN | DELETED) == 0
+                && channel < c
+                && super::model::sigmoid(splats.raw_labels[g * c + channel]) >= threshold
+                && survey.is_none_or(|s| splats.meta.damage_survey[g] == s)
+        })
+        .collect()
 }
 
 /// The edit that sets `bit` to `want(g, current)` for every Gaussian, applied.
@@ -168,7 +240,7 @@ fn set_bit(splats: &mut Splats, bit: u8, want: impl Fn(usize, bool) -> bool) -> 
         })
         .map(|g| g as u32)
         .collect();
-    let edit = Edit { bit, flipped };
+    let mut edit = Edit::Bits { bit, flipped };
     edit.apply(splats);
     edit
 }
@@ -249,7 +321,7 @@ impl EditHistory {
 
     /// Undoes the last edit; false when there is none.
     pub fn undo(&mut self, splats: &mut Splats) -> bool {
-        let Some(edit) = self.undo.pop() else {
+        let Some(mut edit) = self.undo.pop() else {
             return false;
         };
         edit.apply(splats);
@@ -258,7 +330,7 @@ impl EditHistory {
     }
 
     pub fn redo(&mut self, splats: &mut Splats) -> bool {
-        let Some(edit) = self.redo.pop() else {
+        let Some(mut edit) = self.redo.pop() else {
             return false;
         };
         edit.apply(splats);

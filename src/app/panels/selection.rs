@@ -1,0 +1,133 @@
+//! Selection: the count, selecting by damage (class above a probability, optionally first seen in
+//! one survey), marking or clearing a damage class on the selection by hand, hide and undo. The
+//! drawing tools are keys in the viewport (listed here).
+
+use crate::app::commands::Command;
+use crate::app::state::AppState;
+use crate::damage::DamageClass;
+use crate::splats::model::NO_SURVEY;
+use crate::splats::selection::{SetOp, selected_count};
+
+pub struct SelectionPanel {
+    class: DamageClass,
+    threshold: f32,
+    /// None: any survey.
+    survey: Option<u16>,
+}
+
+impl Default for SelectionPanel {
+    fn default() -> Self {
+        SelectionPanel {
+            class: DamageClass::Crack,
+            threshold: 0.5,
+            survey: None,
+        }
+    }
+}
+
+impl SelectionPanel {
+    pub fn ui(&mut self, ui: &mut egui::Ui, state: &AppState, commands: &mut Vec<Command>) {
+        let Some(splats) = &state.splats else {
+            ui.weak("No model.");
+            return;
+        };
+        ui.label(format!(
+            "{} of {} Gaussians selected",
+            selected_count(splats),
+            splats.len()
+        ));
+        ui.weak(
+            "R rectangle · L lasso · P polygon · B brush · Esc leaves; Shift adds, Ctrl removes",
+        );
+        ui.horizontal(|ui| {
+            egui::ComboBox::from_id_salt("selection-class")
+                .selected_text(self.class.id())
+                .show_ui(ui, |ui| {
+                    for class in DamageClass::ALL {
+                        ui.selectable_value(&mut self.class, class, class.id());
+                    }
+                });
+            ui.add(egui::Slider::new(&mut self.threshold, 0.05..=0.95).text("p ≥"));
+        });
+        let mut surveys: Vec<u16> = splats
+            .meta
+            .damage_survey
+            .iter()
+            .copied()
+            .filter(|&s| s != NO_SURVEY)
+            .collect();
+        surveys.sort_unstable();
+        surveys.dedup();
+        ui.horizontal(|ui| {
+            ui.label("First seen in");
+            let label = |s: Option<u16>| {
+                s.map_or("any survey".to_string(), |s| format!("survey {}", s + 1))
+            };
+            egui::ComboBox::from_id_salt("selection-survey")
+                .selected_text(label(self.survey))
+                .show_ui(ui, |ui| {
+                    ui.selectable_value(&mut self.survey, None, label(None));
+                    for &s in &surveys {
+                        ui.selectable_value(&mut self.survey, Some(s), label(Some(s)));
+                    }
+                });
+        });
+        ui.horizontal(|ui| {
+            for (text, op) in [("Select damage", SetOp::Set), ("Add", SetOp::Add)] {
+                if ui.button(text).clicked() {
+                    commands.push(Command::SelectDamage {
+                        class: self.class,
+                        threshold: self.threshold,
+                        survey: self.survey,
+                        op,
+                    });
+                }
+            }
+        });
+        ui.horizontal(|ui| {
+            if ui
+                .button(format!("Mark {}", self.class.id()))
+                .on_hover_text("Set this damage class on the selection (saved in the PLY)")
+                .clicked()
+            {
+                commands.push(Command::SetDamageClass {
+                    class: self.class,
+                    on: true,
+                });
+            }
+            if ui.button(format!("Clear {}", self.class.id())).clicked() {
+                commands.push(Command::SetDamageClass {
+                    class: self.class,
+                    on: false,
+                });
+            }
+        });
+        ui.horizontal(|ui| {
+            for (text, command) in [
+                ("All", Command::SelectAll),
+                ("None", Command::SelectNone),
+                ("Invert", Command::InvertSelection),
+                ("Hide", Command::HideSelected),
+                ("Unhide", Command::UnhideAll),
+            ] {
+                if ui.small_button(text).clicked() {
+                    commands.push(command);
+                }
+            }
+        });
+        ui.horizontal(|ui| {
+            if ui
+                .add_enabled(state.edits.can_undo(), egui::Button::new("Undo"))
+                .clicked()
+            {
+                commands.push(Command::Undo);
+            }
+            if ui
+                .add_enabled(state.edits.can_redo(), egui::Button::new("Redo"))
+                .clicked()
+            {
+                commands.push(Command::Redo);
+            }
+        });
+    }
+}
