@@ -126,11 +126,13 @@ fn rectangle_lasso_and_set_operations_match_the_reference() {
     h.run_steps(1);
     let (a, b) = (c + egui::vec2(-60.0, -40.0), c + egui::vec2(20.0, 30.0));
     let mid = c + egui::vec2(-20.0, -5.0);
-    stroke(&mut h, &[a, mid, b], Modifiers::NONE);
+    // Each reference is taken with the layout the stroke meets (an edit's log line can move the
+    // viewport's edge afterwards).
     let first = reference(&h, |o| Shape::Rect {
         a: local(o, a),
         b: local(o, b),
     });
+    stroke(&mut h, &[a, mid, b], Modifiers::NONE);
     assert!(first.len() > 20, "{}", first.len());
     assert_eq!(selected(&h), first, "rectangle, set");
     // Shift adds a second rectangle.
@@ -158,10 +160,10 @@ fn rectangle_lasso_and_set_operations_match_the_reference() {
         c + egui::vec2(0.0, 10.0),
         c + egui::vec2(-70.0, 10.0),
     ];
-    stroke(&mut h, &lasso, Modifiers::COMMAND);
     let removed = reference(&h, |o| {
         Shape::Polygon(lasso.iter().map(|&p| local(o, p)).collect())
     });
+    stroke(&mut h, &lasso, Modifiers::COMMAND);
     let left: Vec<u32> = union
         .iter()
         .copied()
@@ -173,11 +175,11 @@ fn rectangle_lasso_and_set_operations_match_the_reference() {
     h.key_press(Key::R);
     h.run_steps(1);
     let (a3, b3) = (c + egui::vec2(-200.0, -200.0), c + egui::vec2(30.0, 200.0));
-    stroke(&mut h, &[a3, c, b3], Modifiers::SHIFT | Modifiers::COMMAND);
     let half = reference(&h, |o| Shape::Rect {
         a: local(o, a3),
         b: local(o, b3),
     });
+    stroke(&mut h, &[a3, c, b3], Modifiers::SHIFT | Modifiers::COMMAND);
     let both: Vec<u32> = left.iter().copied().filter(|g| half.contains(g)).collect();
     assert_eq!(selected(&h), both, "rectangle, intersect");
     // Undo walks back through the four edits; redo returns.
@@ -238,11 +240,11 @@ fn polygon_and_brush_match_the_reference() {
         });
         h.run_steps(1);
     }
-    h.key_press(Key::Enter);
-    h.run_steps(2);
     let expected = reference(&h, |o| {
         Shape::Polygon(corners.iter().map(|&p| local(o, p)).collect())
     });
+    h.key_press(Key::Enter);
+    h.run_steps(2);
     assert!(expected.len() > 20);
     assert_eq!(selected(&h), expected, "polygon");
 
@@ -259,14 +261,14 @@ fn polygon_and_brush_match_the_reference() {
         c + egui::vec2(0.0, 0.0),
         c + egui::vec2(30.0, 0.0),
     ];
-    stroke(&mut h, &path, Modifiers::NONE);
-    let brush = |points: &[Pos2]| {
-        reference(&h, |o| Shape::Brush {
+    let brush = |h: &Harness<'_, TwinApp>, points: &[Pos2]| {
+        reference(h, |o| Shape::Brush {
             centres: points.iter().map(|&p| local(o, p)).collect(),
             radius,
         })
     };
-    let (most, least) = (brush(&path), brush(&path[1..]));
+    let (most, least) = (brush(&h, &path), brush(&h, &path[1..]));
+    stroke(&mut h, &path, Modifiers::NONE);
     let got = selected(&h);
     assert!(got.iter().all(|g| most.contains(g)), "beyond the stroke");
     assert!(least.iter().all(|g| got.contains(g)), "missed the stroke");
