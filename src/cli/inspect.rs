@@ -39,6 +39,8 @@ pub struct Report {
     /// Views whose images are undistorted on load.
     pub distorted: usize,
     pub masks: BTreeMap<String, usize>,
+    /// Registered views with an ignore mask (`masks/<image file name>.png`).
+    pub ignore_masks: usize,
     pub warnings: Vec<String>,
 }
 
@@ -75,6 +77,7 @@ impl Report {
                     )
                 })
                 .collect(),
+            ignore_masks: dataset.ignore_mask_count(),
             warnings: dataset.warnings.clone(),
         }
     }
@@ -110,6 +113,7 @@ impl Report {
         println!("camera models {}", list(&self.camera_models));
         println!("undistorted   {} views (on load)", self.distorted);
         println!("masks         {}", list(&self.masks));
+        println!("ignore masks  {} views", self.ignore_masks);
         if self.warnings.is_empty() {
             println!("warnings      none");
         } else {

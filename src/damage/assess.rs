@@ -71,15 +71,12 @@ pub fn evaluate_model(
         let mut out = RenderOutput::default();
         for (done, view) in views.iter().enumerate() {
             rasterizer.forward(splats, &view.camera, &settings, &mut out);
+            // Ignored pixels (the view's ignore mask) are not scored.
+            let (psnr, ssim) = crate::train::evaluate::view_quality(&out.color, view);
             scores.views.push(ViewScore {
                 name: view.name.clone(),
-                psnr: crate::metrics::psnr(&out.color, &view.image.data),
-                ssim: crate::metrics::ssim(
-                    &out.color,
-                    &view.image.data,
-                    view.image.width,
-                    view.image.height,
-                ),
+                psnr,
+                ssim,
             });
             on_view(done + 1, total);
         }

@@ -485,7 +485,14 @@ fn hull_view(full: &TrainView, hulls: &[Hull], margin: u32) -> TrainView {
     let (x0, y0) = (x0.saturating_sub(margin), y0.saturating_sub(margin));
     let (x1, y1) = ((x1 + margin).min(k.width), (y1 + margin).min(k.height));
     let (w, h) = (x1.saturating_sub(x0).max(1), y1.saturating_sub(y0).max(1));
-    let region = union_mask(hulls, k.width, k.height).crop(x0, y0, w, h);
+    let mut region = union_mask(hulls, k.width, k.height).crop(x0, y0, w, h);
+    // Inside the hulls, the view's ignored pixels stay ignored.
+    if let Some(used) = &full.region {
+        let used = used.crop(x0, y0, w, h);
+        for (r, u) in region.data.iter_mut().zip(&used.data) {
+            *r &= u;
+        }
+    }
     TrainView {
         name: full.name.clone(),
         camera: full.camera.cropped(x0, y0, w, h),

@@ -6,7 +6,7 @@ pub mod mask_agreement;
 pub mod memory;
 pub mod ssim;
 
-pub use image_quality::psnr;
+pub use image_quality::{psnr, psnr_masked};
 pub use mask_agreement::MaskAgreement;
 pub use memory::peak_rss_mb;
-pub use ssim::ssim;
+pub use ssim::{ssim, ssim_masked};

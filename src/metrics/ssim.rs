@@ -92,6 +92,31 @@ pub fn ssim(rendered: &[f32], target: &[f32], width: u32, height: u32) -> f64 {
     total / (3 * w * h) as f64
 }
 
+/// `ssim` averaged over the pixels where `used` is non-zero (the SSIM map is computed on the
+/// whole image; ignored pixels only leave the average). NaN when no pixel is used.
+pub fn ssim_masked(rendered: &[f32], target: &[f32], width: u32, height: u32, used: &[u8]) -> f64 {
+    let (w, h) = (width as usize, height as usize);
+    assert_eq!(used.len(), w * h, "ssim: mask size");
+    let n = used.iter().filter(|&&u| u != 0).count();
+    if n == 0 {
+        return f64::NAN;
+    }
+    let mut total = 0.0;
+    for c in 0..3 {
+        let a: Vec<f64> = (0..w * h)
+            .map(|p| rendered[p * 3 + c].clamp(0.0, 1.0) as f64)
+            .collect();
+        let b: Vec<f64> = (0..w * h).map(|p| target[p * 3 + c] as f64).collect();
+        total += ssim_map(&a, &b, w, h)
+            .iter()
+            .zip(used)
+            .filter(|&(_, &u)| u != 0)
+            .map(|(v, _)| v)
+            .sum::<f64>();
+    }
+    total / (3 * n) as f64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

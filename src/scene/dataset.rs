@@ -93,9 +93,22 @@ pub struct LoadedView {
     pub image: RgbImage,
     /// Damage masks present for this view (nearest-neighbour resized to the image).
     pub masks: BTreeMap<DamageClass, Mask>,
+    /// The ignore mask (1 = use, 0 = ignore), when the image has one (`masks/<file>.png`).
+    pub ignore: Option<Mask>,
 }
 
 impl Dataset {
+    /// Views with an ignore mask (`masks/<image file name>.png`, COLMAP's convention).
+    pub fn ignore_mask_count(&self) -> usize {
+        let Some(dir) = &self.masks_dir else { return 0 };
+        self.views
+            .iter()
+            .filter(|v| {
+                crate::scene::masks::ignore_mask_path(dir, &v.name, &v.image_path).is_some()
+            })
+            .count()
+    }
+
     /// The index of the view named `name`: its full name (`images/0049.jpg`'s stem path) or the
     /// last part of it (`0049`).
     pub fn view_index(&self, name: &str) -> Option<usize> {

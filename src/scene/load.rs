@@ -8,7 +8,7 @@ use std::path::Path;
 use crate::scene::DamageClass;
 use crate::scene::atomic::write_atomic;
 use crate::scene::limits::{MAX_IMAGE_SIDE, check_image_size};
-use crate::scene::masks::{read_view_masks, resize_mask};
+use crate::scene::masks::{read_ignore_mask, read_view_masks, resize_mask};
 use crate::scene::undistort::{undistort_mask, undistort_rgb};
 use crate::scene::{
     Camera, Dataset, Distortion, ImageScale, LoadedView, Mask, RgbImage, SceneError, View,
@@ -238,11 +238,22 @@ impl Dataset {
             )?,
             None => Default::default(),
         };
+        let ignore = match &self.masks_dir {
+            Some(dir) => read_ignore_mask(dir, &view.name, &view.image_path, stored)?.map(|m| {
+                let m = match &distortion {
+                    Some(d) => undistort_mask(&m, d, &camera.intrinsics),
+                    None => m,
+                };
+                resize_mask(&m, width, height)
+            }),
+            None => None,
+        };
         Ok(LoadedView {
             name: view.name.clone(),
             camera: Camera::resized(&camera, width, height),
             image: resize_rgb(&image, width, height),
             masks,
+            ignore,
         })
     }
 

@@ -63,6 +63,9 @@ pub(crate) fn count_masks_within(
         }
     }
     let present: Vec<[bool; 3]> = png_files(masks_dir, budget)
+        .into_iter()
+        .filter(|path| !is_ignore_mask_name(path))
+        .collect::<Vec<_>>()
         .par_iter()
         .filter_map(|path| read_colour_mask_classes(path).ok())
         .collect();
@@ -74,6 +77,20 @@ pub(crate) fn count_masks_within(
         }
     }
     counts
+}
+
+/// `01.jpg.png`: an ignore mask by COLMAP's naming (an image file name plus `.png`), not a
+/// colour-coded damage mask.
+fn is_ignore_mask_name(path: &Path) -> bool {
+    path.file_stem()
+        .map(Path::new)
+        .and_then(|stem| stem.extension())
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| {
+            ["jpg", "jpeg", "png", "tif", "tiff", "bmp", "webp"]
+                .iter()
+                .any(|x| e.eq_ignore_ascii_case(x))
+        })
 }
 
 /// Which classes a colour-coded mask file contains.
@@ -167,6 +184,44 @@ pub fn read_colour_mask(
         }
     }
     Ok(masks)
+}
+
+/// Where an image's ignore mask is by COLMAP's convention (OpenSfM writes the same):
+/// `masks/<image file name>.png`, beside the damage masks' class folders (for `images/a/01.jpg`,
+/// stem `a/01`: `masks/a/01.jpg.png`). None when there is none.
+pub fn ignore_mask_path(masks_dir: &Path, stem: &str, image_path: &Path) -> Option<PathBuf> {
+    let file = image_path.file_name()?.to_str()?;
+    let folder = Path::new(stem).parent().unwrap_or(Path::new(""));
+    let path = masks_dir.join(folder).join(format!("{file}.png"));
+    path.is_file().then_some(path)
+}
+
+/// An image's ignore mask (1 = use the pixel, 0 = ignore it: a pedestrian, a car, the sky), when
+/// it has one; refused when its size is not the image's.
+pub fn read_ignore_mask(
+    masks_dir: &Path,
+    stem: &str,
+    image_path: &Path,
+    image_size: (u32, u32),
+) -> Result<Option<Mask>, SceneError> {
+    let Some(path) = ignore_mask_path(masks_dir, stem, image_path) else {
+        return Ok(None);
+    };
+    let mask = read_binary_mask(&path)?;
+    if (mask.width, mask.height) != image_size {
+        return Err(SceneError::invalid(
+            &path,
+            format!(
+                "ignore mask is {}×{} but its image {} is {}×{}",
+                mask.width,
+                mask.height,
+                image_path.display(),
+                image_size.0,
+                image_size.1
+            ),
+        ));
+    }
+    Ok(Some(mask))
 }
 
 /// The masks of the view whose image file stem is `stem`, at the stored image size: per-class

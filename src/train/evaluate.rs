@@ -4,7 +4,7 @@
 use glam::Vec3;
 use serde::Serialize;
 
-use crate::metrics::psnr;
+use crate::metrics::{psnr, psnr_masked, ssim, ssim_masked};
 use crate::raster::{RasterBackend, Rasterizer, RenderOutput, RenderSettings};
 use crate::splats::Splats;
 use crate::train::spec::TrainView;
@@ -18,6 +18,22 @@ pub struct EvalScores {
     pub views: usize,
 }
 
+/// PSNR and SSIM of a render of `view` against its photo, over the pixels its region (the
+/// ignore mask) uses: pedestrians and cars masked out of training are not scored either.
+pub fn view_quality(rendered: &[f32], view: &TrainView) -> (f64, f64) {
+    let (w, h) = (view.image.width, view.image.height);
+    match &view.region {
+        Some(used) => (
+            psnr_masked(rendered, &view.image.data, &used.data),
+            ssim_masked(rendered, &view.image.data, w, h, &used.data),
+        ),
+        None => (
+            psnr(rendered, &view.image.data),
+            ssim(rendered, &view.image.data, w, h),
+        ),
+    }
+}
+
 /// Renders every view and averages PSNR and SSIM.
 pub(crate) fn evaluate_with(
     rasterizer: &mut dyn RasterBackend,
@@ -29,13 +45,9 @@ pub(crate) fn evaluate_with(
     let mut scores = EvalScores::default();
     for view in views {
         rasterizer.forward(splats, &view.camera, settings, out);
-        scores.psnr += psnr(&out.color, &view.image.data);
-        scores.ssim += crate::metrics::ssim(
-            &out.color,
-            &view.image.data,
-            view.image.width,
-            view.image.height,
-        );
+        let (p, s) = view_quality(&out.color, view);
+        scores.psnr += p;
+        scores.ssim += s;
     }
     let n = views.len().max(1) as f64;
     scores.psnr /= n;

@@ -99,7 +99,8 @@ pub fn load_views(
                 camera: loaded.camera,
                 image: loaded.image,
                 labels: label_masks,
-                region: None,
+                // Ignored pixels (ignore masks: pedestrians, cars, sky) take no part in any loss.
+                region: loaded.ignore,
             })
         })
         .collect()
