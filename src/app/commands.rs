@@ -78,6 +78,13 @@ pub enum Command {
         class: crate::damage::DamageClass,
         on: bool,
     },
+    /// Refine the selected Gaussians on the open dataset (hull masks, full resolution, the rest
+    /// frozen); the result becomes the model, undoably.
+    RefineSelection {
+        strategy: crate::damage::refine::Strategy,
+        iterations: u32,
+    },
+    CancelRefine,
     /// Undo or redo the last selection, visibility or damage-class edit.
     Undo,
     Redo,

@@ -292,6 +292,7 @@ impl eframe::App for TwinApp {
         });
         if self.demo.is_some()
             || self.state.measuring
+            || self.state.refine.is_some()
             || self.state.training.as_ref().is_some_and(|t| t.is_running())
         {
             // Keep polling the workers while they run (events arrive between input events), as

@@ -23,6 +23,9 @@ use crate::timeline::Twin;
 use crate::train::history::History;
 
 mod editing;
+mod refining;
+
+pub use refining::RefineSession;
 
 /// Most log lines kept for the log panel.
 const LOG_LINES: usize = 200;
@@ -100,6 +103,8 @@ pub struct AppState {
     pub measuring: bool,
     /// Selection and visibility edits of the model on screen, for undo and redo.
     pub edits: EditHistory,
+    /// A refinement of the selection, while it runs.
+    pub refine: Option<RefineSession>,
     pub log: VecDeque<String>,
     /// Viewport size in pixels, as last laid out (for PNG export at screen size).
     pub viewport_pixels: [u32; 2],
@@ -129,6 +134,7 @@ impl AppState {
             regions: None,
             measuring: false,
             edits: EditHistory::default(),
+            refine: None,
             log: VecDeque::new(),
             viewport_pixels: [960, 540],
             frame_stats: FrameStats::default(),
@@ -190,6 +196,7 @@ impl AppState {
             changed = true;
             self.on_worker_result(result);
         }
+        changed |= self.poll_refine();
         if let Some(session) = &mut self.training {
             let update = session.poll(&mut self.history);
             if update.changed {
@@ -409,6 +416,11 @@ impl AppState {
             Command::InvertSelection => self.edit_model(selection::invert),
             Command::HideSelected => self.edit_model(selection::hide_selected),
             Command::UnhideAll => self.edit_model(selection::unhide_all),
+            Command::RefineSelection {
+                strategy,
+                iterations,
+            } => self.start_refine(strategy, iterations),
+            Command::CancelRefine => self.cancel_refine(),
             Command::Undo => self.undo_redo(false),
             Command::Redo => self.undo_redo(true),
             Command::Unsnap => {

@@ -84,6 +84,8 @@ pub struct RefineConfig {
     /// into the twin's look before training and scoring (a later survey's light must not
     /// repaint the twin).
     pub appearance: BTreeMap<usize, ColourTransform>,
+    /// Refine these Gaussians (a person's selection) instead of selecting damage by the masks.
+    pub given: Option<Vec<u32>>,
 }
 
 impl Default for RefineConfig {
@@ -109,6 +111,7 @@ impl Default for RefineConfig {
             label_pos_weight: 2.0,
             label_lr: run.label_lr,
             appearance: BTreeMap::new(),
+            given: None,
         }
     }
 }
@@ -242,33 +245,14 @@ pub fn refine(
         ))
     })?;
 
-    // 1. Select, against the training views' own masks at the selection scale.
+    // 1. Select, against the training views' own masks at the selection scale (or take the
+    // person's selection as it is).
     let t = Instant::now();
-    ctx.log(format!(
-        "selecting damage Gaussians among {} against {} views' masks",
-        model.len(),
-        train_idx.len()
-    ));
-    let mask_views: Vec<MaskView> = train_idx
-        .par_iter()
-        .map(|&i| {
-            let (camera, mut masks) =
-                dataset.load_view_masks(i, &masks_dir, config.select_scale)?;
-            Ok(MaskView {
-                camera,
-                masks: DamageClass::ALL.iter().map(|c| masks.remove(c)).collect(),
-            })
-        })
-        .collect::<Result<_, crate::scene::SceneError>>()?;
+    let selection = match &config.given {
+        Some(given) => given_selection(model, given),
+        None => select_by_masks(ctx, dataset, model, config, &train_idx, &masks_dir)?,
+    };
     let n = model.len();
-    let selection = select(
-        model,
-        &mask_views,
-        &config.select,
-        config.background,
-        &mut |done, total| phase_progress(ctx, "select", done, total, n),
-    );
-    drop(mask_views);
     seconds.select = t.elapsed().as_secs_f64();
     ctx.log(format!(
         "selection: {} filtered, {} validated, {} with neighbours",
@@ -430,6 +414,70 @@ pub fn refine(
 }
 
 /// Per selected Gaussian its region (all in region 0 when hulls are per view).
+/// A person's selection (indices into `model`, out-of-range ones dropped), each classed by its
+/// most probable label.
+fn given_selection(model: &Splats, given: &[u32]) -> Selection {
+    let mut selected: Vec<u32> = given
+        .iter()
+        .copied()
+        .filter(|&g| (g as usize) < model.len())
+        .collect();
+    selected.sort_unstable();
+    selected.dedup();
+    let channels = model.label_channels.min(DamageClass::ALL.len());
+    let validated_class = selected
+        .iter()
+        .map(|&g| {
+            let labels = &model.labels_of(g as usize)[..channels];
+            (0..channels)
+                .max_by(|&a, &b| labels[a].total_cmp(&labels[b]))
+                .map_or(DamageClass::Crack, |k| DamageClass::ALL[k])
+        })
+        .collect();
+    Selection {
+        filtered: selected.clone(),
+        validated: selected.clone(),
+        selected,
+        validated_class,
+        seconds: Default::default(),
+    }
+}
+
+/// Damage Gaussians selected against the training views' masks at the selection scale.
+fn select_by_masks(
+    ctx: &mut JobContext,
+    dataset: &Dataset,
+    model: &Splats,
+    config: &RefineConfig,
+    train_idx: &[usize],
+    masks_dir: &std::path::Path,
+) -> Result<Selection, JobError> {
+    ctx.log(format!(
+        "selecting damage Gaussians among {} against {} views' masks",
+        model.len(),
+        train_idx.len()
+    ));
+    let mask_views: Vec<MaskView> = train_idx
+        .par_iter()
+        .map(|&i| {
+            let (camera, mut masks) = dataset.load_view_masks(i, masks_dir, config.select_scale)?;
+            Ok(MaskView {
+                camera,
+                masks: DamageClass::ALL.iter().map(|c| masks.remove(c)).collect(),
+            })
+        })
+        .collect::<Result<_, crate::scene::SceneError>>()?;
+    let n = model.len();
+    let selection = select(
+        model,
+        &mask_views,
+        &config.select,
+        config.background,
+        &mut |done, total| phase_progress(ctx, "select", done, total, n),
+    );
+    Ok(selection)
+}
+
 fn region_labels(model: &Splats, selection: &Selection, config: &RefineConfig) -> Vec<u32> {
     if !config.hulls.per_region {
         return vec![0; selection.selected.len()];

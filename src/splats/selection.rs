@@ -140,8 +140,8 @@ pub fn hits(splats: &Splats, camera: &Camera, shape: &Shape) -> Vec<bool> {
         .collect()
 }
 
-/// A change to the model that undoes itself when applied again: state bits flipped, or label
-/// values swapped with the ones it holds.
+/// A change to the model that undoes itself when applied again: state bits flipped, label
+/// values or a whole model swapped with the ones it holds.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Edit {
     /// Gaussians whose `bit` flipped.
@@ -152,6 +152,8 @@ pub enum Edit {
         gaussians: Vec<u32>,
         labels: Vec<f32>,
     },
+    /// The whole model replaced (a refinement): the other model, swapped in and out.
+    Model(Box<Splats>),
 }
 
 impl Edit {
@@ -159,6 +161,7 @@ impl Edit {
         match self {
             Edit::Bits { flipped, .. } => flipped.is_empty(),
             Edit::Labels { gaussians, .. } => gaussians.is_empty(),
+            Edit::Model(_) => false,
         }
     }
 
@@ -178,6 +181,7 @@ impl Edit {
                         .swap_with_slice(&mut labels[k * c..(k + 1) * c]);
                 }
             }
+            Edit::Model(other) => std::mem::swap(splats, other),
         }
     }
 }

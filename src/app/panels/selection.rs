@@ -1,14 +1,17 @@
 //! Selection: the count, selecting by damage (class above a probability, optionally first seen in
-//! one survey), marking or clearing a damage class on the selection by hand, hide and undo. The
-//! drawing tools are keys in the viewport (listed here).
+//! one survey), marking or clearing a damage class on the selection by hand, refining the
+//! selection, hide and undo. The drawing tools are keys in the viewport (listed here).
 
 use crate::app::commands::Command;
 use crate::app::state::AppState;
 use crate::damage::DamageClass;
+use crate::damage::refine::Strategy;
 use crate::splats::model::NO_SURVEY;
 use crate::splats::selection::{SetOp, selected_count};
 
 pub struct SelectionPanel {
+    strategy: Strategy,
+    iterations: u32,
     class: DamageClass,
     threshold: f32,
     /// None: any survey.
@@ -18,6 +21,8 @@ pub struct SelectionPanel {
 impl Default for SelectionPanel {
     fn default() -> Self {
         SelectionPanel {
+            strategy: Strategy::Finetune,
+            iterations: 300,
             class: DamageClass::Crack,
             threshold: 0.5,
             survey: None,
@@ -115,6 +120,56 @@ impl SelectionPanel {
                 }
             }
         });
+        ui.separator();
+        match &state.refine {
+            Some(session) => {
+                ui.horizontal(|ui| {
+                    let text = session
+                        .progress
+                        .as_ref()
+                        .map_or("starting".to_string(), |p| {
+                            format!("{} {} / {}", p.phase, p.step, p.total)
+                        });
+                    ui.spinner();
+                    ui.label(format!("refining: {text}"));
+                    if ui.button("Cancel").clicked() {
+                        commands.push(Command::CancelRefine);
+                    }
+                });
+            }
+            None => {
+                ui.horizontal(|ui| {
+                    egui::ComboBox::from_id_salt("refine-strategy")
+                        .selected_text(format!("{:?}", self.strategy).to_lowercase())
+                        .show_ui(ui, |ui| {
+                            for s in [Strategy::Finetune, Strategy::Retrain] {
+                                let name = format!("{s:?}").to_lowercase();
+                                ui.selectable_value(&mut self.strategy, s, name);
+                            }
+                        });
+                    ui.add(
+                        egui::DragValue::new(&mut self.iterations)
+                            .range(10..=20_000)
+                            .suffix(" steps"),
+                    );
+                });
+                let can = selected_count(splats) > 0
+                    && state.scene.as_ref().is_some_and(|s| s.dataset.is_some());
+                if ui
+                    .add_enabled(can, egui::Button::new("Refine selection"))
+                    .on_hover_text(
+                        "Train the selected Gaussians on the full-resolution photos inside their \
+                         hulls, the rest frozen (undo restores the model)",
+                    )
+                    .clicked()
+                {
+                    commands.push(Command::RefineSelection {
+                        strategy: self.strategy,
+                        iterations: self.iterations,
+                    });
+                }
+            }
+        }
         ui.horizontal(|ui| {
             if ui
                 .add_enabled(state.edits.can_undo(), egui::Button::new("Undo"))

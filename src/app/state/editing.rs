@@ -11,6 +11,10 @@ impl AppState {
     /// Applies a selection or visibility edit to the model on screen, undoably; a measurement of
     /// the model stays current (no geometry changed).
     pub(super) fn edit_model(&mut self, edit: impl FnOnce(&mut Splats) -> Edit) {
+        if self.refine.is_some() {
+            self.log_line("a refinement is running: wait for it or cancel it");
+            return;
+        }
         let Some(splats) = &self.splats else {
             self.log_line("nothing to select yet: no model");
             return;
@@ -43,6 +47,10 @@ impl AppState {
     }
 
     pub(super) fn undo_redo(&mut self, redo: bool) {
+        if self.refine.is_some() {
+            self.log_line("a refinement is running: wait for it or cancel it");
+            return;
+        }
         let Some(splats) = &self.splats else { return };
         let mut model = Splats::clone(splats);
         let done = if redo {
