@@ -17,6 +17,7 @@ pub mod overlay;
 pub mod palette;
 pub mod reference;
 pub mod refine;
+mod refine_selection;
 pub mod select;
 pub mod setup;
 

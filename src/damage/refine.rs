@@ -12,14 +12,15 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::damage::TrainMode;
 use crate::damage::evaluate::{DamageReadout, evaluate_damage};
-use crate::damage::hulls::{Hull, HullConfig, regions, union_mask, view_hulls};
+use crate::damage::hulls::{Hull, HullConfig, union_mask, view_hulls};
 use crate::damage::lift::WeightLift;
 use crate::damage::overlay::OVERLAY_TOLERANCE;
 use crate::damage::reference::{load_reference_views, reference_source};
-use crate::damage::select::{MaskView, SelectConfig, Selection, select};
+use crate::damage::refine_selection::{given_selection, region_labels, select_by_masks};
+use crate::damage::select::{SelectConfig, Selection};
 use crate::damage::setup::apply_mode;
-use crate::damage::{DamageClass, TrainMode};
 use crate::raster::{RenderSettings, render};
 use crate::scene::project::ColourTransform;
 use crate::scene::{Dataset, ImageScale, Mask};
@@ -213,7 +214,13 @@ pub fn refine_job(
     })
 }
 
-fn phase_progress(ctx: &JobContext, phase: &'static str, step: usize, total: usize, n: usize) {
+pub(super) fn phase_progress(
+    ctx: &JobContext,
+    phase: &'static str,
+    step: usize,
+    total: usize,
+    n: usize,
+) {
     ctx.progress(Progress {
         phase,
         step: step as u32,
@@ -411,111 +418,6 @@ pub fn refine(
         report,
         cancelled: outcome.cancelled,
     })
-}
-
-/// Per selected Gaussian its region (all in region 0 when hulls are per view).
-/// A person's selection (indices into `model`, out-of-range ones dropped), each classed by its
-/// most probable label.
-fn given_selection(model: &Splats, given: &[u32]) -> Selection {
-    let mut selected: Vec<u32> = given
-        .iter()
-        .copied()
-        .filter(|&g| (g as usize) < model.len())
-        .collect();
-    selected.sort_unstable();
-    selected.dedup();
-    let channels = model.label_channels.min(DamageClass::ALL.len());
-    let validated_class = selected
-        .iter()
-        .map(|&g| {
-            let labels = &model.labels_of(g as usize)[..channels];
-            (0..channels)
-                .max_by(|&a, &b| labels[a].total_cmp(&labels[b]))
-                .map_or(DamageClass::Crack, |k| DamageClass::ALL[k])
-        })
-        .collect();
-    Selection {
-        filtered: selected.clone(),
-        validated: selected.clone(),
-        selected,
-        validated_class,
-        seconds: Default::default(),
-    }
-}
-
-/// Damage Gaussians selected against the training views' masks at the selection scale.
-fn select_by_masks(
-    ctx: &mut JobContext,
-    dataset: &Dataset,
-    model: &Splats,
-    config: &RefineConfig,
-    train_idx: &[usize],
-    masks_dir: &std::path::Path,
-) -> Result<Selection, JobError> {
-    ctx.log(format!(
-        "selecting damage Gaussians among {} against {} views' masks",
-        model.len(),
-        train_idx.len()
-    ));
-    let mask_views: Vec<MaskView> = train_idx
-        .par_iter()
-        .map(|&i| {
-            let (camera, mut masks) = dataset.load_view_masks(i, masks_dir, config.select_scale)?;
-            Ok(MaskView {
-                camera,
-                masks: DamageClass::ALL.iter().map(|c| masks.remove(c)).collect(),
-            })
-        })
-        .collect::<Result<_, crate::scene::SceneError>>()?;
-    let n = model.len();
-    let selection = select(
-        model,
-        &mask_views,
-        &config.select,
-        config.background,
-        &mut |done, total| phase_progress(ctx, "select", done, total, n),
-    );
-    Ok(selection)
-}
-
-fn region_labels(model: &Splats, selection: &Selection, config: &RefineConfig) -> Vec<u32> {
-    if !config.hulls.per_region {
-        return vec![0; selection.selected.len()];
-    }
-    // The radius: a few median nearest-neighbour spacings of the selection, so a region is a
-    // connected piece of damage at the twin's own density.
-    let spacing = median_spacing(model, &selection.selected);
-    regions(
-        model,
-        &selection.selected,
-        config.region_spacings * spacing.max(1e-6),
-    )
-}
-
-/// The median distance of the selected Gaussians to their nearest selected neighbour.
-fn median_spacing(model: &Splats, selected: &[u32]) -> f32 {
-    use kiddo::{ImmutableKdTree, SquaredEuclidean};
-    if selected.len() < 2 {
-        return 0.0;
-    }
-    let coords: Vec<[f32; 3]> = selected
-        .iter()
-        .map(|&g| model.means[g as usize].to_array())
-        .collect();
-    let tree: ImmutableKdTree<f32, 3> = ImmutableKdTree::new_from_slice(&coords);
-    let two = std::num::NonZeroUsize::new(2).unwrap_or(std::num::NonZeroUsize::MIN);
-    let mut d: Vec<f32> = coords
-        .iter()
-        .map(|c| {
-            tree.nearest_n::<SquaredEuclidean>(c, two)
-                .iter()
-                .map(|nb| nb.distance)
-                .fold(0.0f32, f32::max)
-                .sqrt()
-        })
-        .collect();
-    d.sort_by(f32::total_cmp);
-    d[d.len() / 2]
 }
 
 /// The training view of one view's hulls: the box around all of them plus a margin, cropped
