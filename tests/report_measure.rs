@@ -359,3 +359,34 @@ fn the_viewer_selects_and_frames_a_measured_region() {
         state.splats_generation
     );
 }
+
+#[test]
+fn a_stray_damage_gaussian_far_out_in_the_plane_does_not_blow_up_the_map() {
+    // Three crack Gaussians 300 m along the wall's plane: the plane's map would be 300 m wide;
+    // it is mapped with larger cells instead of ~40 million 1 cm ones.
+    let mut splats = damaged_wall();
+    for k in 0..3 {
+        let p = Vec3::new(300.0 + k as f32 * 0.01, -0.005, 1.0);
+        splats.push(
+            p,
+            Vec3::new(0.01, 0.001, 0.004).ln(),
+            Quat::IDENTITY,
+            4.0,
+            &[0.2, 0.2, 0.2],
+            &[ON, OFF, OFF],
+            90_000 + k,
+            0,
+        );
+    }
+    let cameras = [camera_at(Vec3::new(2.0, -5.0, 1.5))];
+    let m = measure_damage(&splats, &cameras, &MeasureConfig::default());
+    let cells: usize = m
+        .planes
+        .iter()
+        .map(|p| p.map_cells[0] * p.map_cells[1])
+        .max()
+        .unwrap();
+    assert!(cells <= 8_000_000, "{cells} cells");
+    let length = m.total_length(DamageClass::Crack);
+    assert!((length - 2.5).abs() < 0.4, "crack length {length} m");
+}

@@ -150,6 +150,16 @@ impl Measurement {
     }
 }
 
+/// Most cells a plane's map may have (~100 MB with three label channels): a plane whose damage
+/// spans more (a stray labelled Gaussian far out in its plane) is mapped with larger cells.
+const MAX_MAP_CELLS: f64 = 8.0e6;
+
+/// `cell`, or the larger cell that keeps the map of `[lower, upper]` within `MAX_MAP_CELLS`.
+fn map_cell(lower: DVec2, upper: DVec2, cell: f64) -> f64 {
+    let area = (upper - lower).max(DVec2::ZERO);
+    cell.max((area.x * area.y / MAX_MAP_CELLS).sqrt())
+}
+
 /// Damage Gaussians: some class at `threshold` or more, opacity at `min_opacity` or more, not
 /// hidden or deleted.
 pub fn damage_seeds(splats: &Splats, config: &MeasureConfig) -> Vec<u32> {
@@ -182,7 +192,14 @@ pub fn measure_damage(splats: &Splats, cameras: &[Camera], config: &MeasureConfi
     for (index, plane) in planes.iter().enumerate() {
         let frame = facing_frame(splats, plane, cameras, &occlusion, config);
         let (lower, upper) = seed_bounds(splats, plane, &frame, config.margin);
-        let map = surface_map(splats, frame, lower, upper, config.cell, config.slab);
+        let map = surface_map(
+            splats,
+            frame,
+            lower,
+            upper,
+            map_cell(lower, upper, config.cell),
+            config.slab,
+        );
         let owner = SeedOwner::new(splats, &planes, &frame, config.slab);
         for class in DamageClass::ALL {
             regions_of_class(splats, &map, index, class, &owner, config, &mut out.regions);
