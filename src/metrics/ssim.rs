@@ -75,46 +75,57 @@ pub fn ssim_map(a: &[f64], b: &[f64], width: usize, height: usize) -> Vec<f64> {
 /// Mean SSIM of two interleaved RGB images in [0, 1] (`data[(y·w + x)·3 + c]`). The rendered
 /// image is clamped to [0, 1] first, as 3DGS's evaluation does (and as `psnr` does here).
 pub fn ssim(rendered: &[f32], target: &[f32], width: u32, height: u32) -> f64 {
-    let (w, h) = (width as usize, height as usize);
-    assert_eq!(rendered.len(), w * h * 3, "ssim: rendered image size");
-    assert_eq!(target.len(), w * h * 3, "ssim: target image size");
-    if w * h == 0 {
+    let n = width as usize * height as usize;
+    if n == 0 {
         return f64::NAN;
     }
-    let mut total = 0.0;
-    for c in 0..3 {
-        let a: Vec<f64> = (0..w * h)
-            .map(|p| rendered[p * 3 + c].clamp(0.0, 1.0) as f64)
-            .collect();
-        let b: Vec<f64> = (0..w * h).map(|p| target[p * 3 + c] as f64).collect();
-        total += ssim_map(&a, &b, w, h).iter().sum::<f64>();
-    }
-    total / (3 * w * h) as f64
+    ssim_over(rendered, target, width, height, None) / (3 * n) as f64
 }
 
 /// `ssim` averaged over the pixels where `used` is non-zero (the SSIM map is computed on the
 /// whole image; ignored pixels only leave the average). NaN when no pixel is used.
 pub fn ssim_masked(rendered: &[f32], target: &[f32], width: u32, height: u32, used: &[u8]) -> f64 {
-    let (w, h) = (width as usize, height as usize);
-    assert_eq!(used.len(), w * h, "ssim: mask size");
+    assert_eq!(
+        used.len(),
+        width as usize * height as usize,
+        "ssim: mask size"
+    );
     let n = used.iter().filter(|&&u| u != 0).count();
     if n == 0 {
         return f64::NAN;
     }
+    ssim_over(rendered, target, width, height, Some(used)) / (3 * n) as f64
+}
+
+/// The SSIM map summed over the channels and over the used pixels (all without `used`).
+fn ssim_over(
+    rendered: &[f32],
+    target: &[f32],
+    width: u32,
+    height: u32,
+    used: Option<&[u8]>,
+) -> f64 {
+    let (w, h) = (width as usize, height as usize);
+    assert_eq!(rendered.len(), w * h * 3, "ssim: rendered image size");
+    assert_eq!(target.len(), w * h * 3, "ssim: target image size");
     let mut total = 0.0;
     for c in 0..3 {
         let a: Vec<f64> = (0..w * h)
             .map(|p| rendered[p * 3 + c].clamp(0.0, 1.0) as f64)
             .collect();
         let b: Vec<f64> = (0..w * h).map(|p| target[p * 3 + c] as f64).collect();
-        total += ssim_map(&a, &b, w, h)
-            .iter()
-            .zip(used)
-            .filter(|&(_, &u)| u != 0)
-            .map(|(v, _)| v)
-            .sum::<f64>();
+        let map = ssim_map(&a, &b, w, h);
+        total += match used {
+            Some(used) => map
+                .iter()
+                .zip(used)
+                .filter(|&(_, &u)| u != 0)
+                .map(|(v, _)| v)
+                .sum::<f64>(),
+            None => map.iter().sum::<f64>(),
+        };
     }
-    total / (3 * n) as f64
+    total
 }
 
 #[cfg(test)]
