@@ -100,6 +100,15 @@ impl Camera {
         ))
     }
 
+    /// The pixel (column, row) a world point projects into, when it lands inside the image in
+    /// front of the camera.
+    pub fn pixel_of(&self, p_world: Vec3) -> Option<(u32, u32)> {
+        let p = self.project(p_world)?;
+        let k = &self.intrinsics;
+        (p.x >= 0.0 && p.y >= 0.0 && p.x < k.width as f32 && p.y < k.height as f32)
+            .then_some((p.x as u32, p.y as u32))
+    }
+
     /// The same pose with intrinsics for another image size.
     pub fn resized(&self, width: u32, height: u32) -> Camera {
         Camera {

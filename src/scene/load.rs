@@ -239,13 +239,8 @@ impl Dataset {
             None => Default::default(),
         };
         let ignore = match &self.masks_dir {
-            Some(dir) => read_ignore_mask(dir, &view.name, &view.image_path, stored)?.map(|m| {
-                let m = match &distortion {
-                    Some(d) => undistort_mask(&m, d, &camera.intrinsics),
-                    None => m,
-                };
-                resize_mask(&m, width, height)
-            }),
+            Some(dir) => read_ignore_mask(dir, &view.name, &view.image_path, stored)?
+                .map(|m| prepared_mask(m, &camera, distortion.as_ref(), (width, height))),
             None => None,
         };
         Ok(LoadedView {
@@ -354,14 +349,26 @@ fn read_masks_at(
     distortion: Option<&Distortion>,
     size: (u32, u32),
 ) -> Result<BTreeMap<DamageClass, Mask>, SceneError> {
-    let mut masks = read_view_masks(dir, &view.name, &view.image_path, stored)?;
-    for mask in masks.values_mut() {
-        if let Some(d) = distortion {
-            *mask = undistort_mask(mask, d, &camera.intrinsics);
-        }
-        *mask = resize_mask(mask, size.0, size.1);
-    }
-    Ok(masks)
+    let masks = read_view_masks(dir, &view.name, &view.image_path, stored)?;
+    Ok(masks
+        .into_iter()
+        .map(|(class, mask)| (class, prepared_mask(mask, camera, distortion, size)))
+        .collect())
+}
+
+/// A mask at the stored image size made ready to pair with its loaded image: undistorted with
+/// the image, then resized to `size`.
+fn prepared_mask(
+    mask: Mask,
+    camera: &Camera,
+    distortion: Option<&Distortion>,
+    size: (u32, u32),
+) -> Mask {
+    let mask = match distortion {
+        Some(d) => undistort_mask(&mask, d, &camera.intrinsics),
+        None => mask,
+    };
+    resize_mask(&mask, size.0, size.1)
 }
 
 #[cfg(test)]

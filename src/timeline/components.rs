@@ -49,16 +49,9 @@ pub fn components_at(
         }
         let camera = view.camera.resized(labels.width(), labels.height());
         for (p, vote) in points.iter().zip(&mut votes) {
-            let Some(px) = camera.project(p.as_vec3()) else {
+            let Some((x, y)) = camera.pixel_of(p.as_vec3()) else {
                 continue;
             };
-            if !(px.x >= 0.0 && px.y >= 0.0) {
-                continue;
-            }
-            let (x, y) = (px.x as u32, px.y as u32);
-            if x >= labels.width() || y >= labels.height() {
-                continue;
-            }
             let z = f64::from(camera.world_to_camera(p.as_vec3()).z) * metres_per_unit;
             let seen = f64::from(depth.get_pixel(x, y).0[0]) / 1000.0;
             if seen > 0.0 && (seen - z).abs() <= DEPTH_TOLERANCE * z + DEPTH_SLACK_M {

@@ -104,15 +104,11 @@ impl EarlierSurvey {
     pub fn saw_damage(&self, point: Vec3, class: usize) -> Option<bool> {
         let (mut seen, mut damaged) = (0usize, 0usize);
         for view in &self.views {
-            let Some(pixel) = view.camera.project(point) else {
+            let Some((x, y)) = view.camera.pixel_of(point) else {
                 continue;
             };
             let k = &view.camera.intrinsics;
-            let (x, y) = (pixel.x.floor(), pixel.y.floor());
-            if !(x >= 0.0 && y >= 0.0 && x < k.width as f32 && y < k.height as f32) {
-                continue;
-            }
-            let (x, y) = (x as i64, y as i64);
+            let (x, y) = (i64::from(x), i64::from(y));
             let (w, h) = (i64::from(k.width), i64::from(k.height));
             let z = view.camera.world_to_camera(point).z;
             let surface = view.depth[(y * w + x) as usize];

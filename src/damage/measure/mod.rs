@@ -237,12 +237,7 @@ fn facing_frame(
     let on_plane = centre - plane.normal * (centre.dot(plane.normal) - plane.offset);
     let vote: f64 = cameras
         .iter()
-        .filter(|camera| {
-            let k = &camera.intrinsics;
-            camera.project(centre.as_vec3()).is_some_and(|px| {
-                px.x >= 0.0 && px.y >= 0.0 && px.x < k.width as f32 && px.y < k.height as f32
-            })
-        })
+        .filter(|camera| camera.pixel_of(centre.as_vec3()).is_some())
         .map(|camera| {
             let eye = camera.position().as_dvec3();
             let d = eye - centre;

@@ -98,7 +98,8 @@ pub fn surface_map(
     let blur = SCREEN_BLUR * cell * cell;
 
     // Footprints in plane coordinates, nearest the viewer first.
-    let mut footprints: Vec<(f64, usize, DVec2, [f64; 3])> = Vec::new();
+    // (distance from the viewer, Gaussian, centre, conic, reach along u and v)
+    let mut footprints: Vec<(f64, usize, DVec2, [f64; 3], DVec2)> = Vec::new();
     for g in 0..splats.len() {
         if splats.meta.state[g] & (HIDDEN | DELETED) != 0 {
             continue;
@@ -124,20 +125,17 @@ pub fn surface_map(
             continue;
         }
         // The inverse covariance (conic), as the renderer evaluates it.
-        footprints.push((-h, g, uv, [c / det, -b / det, a / det]));
+        let reach = FOOTPRINT_SIGMAS * DVec2::new(a.sqrt(), c.sqrt());
+        footprints.push((-h, g, uv, [c / det, -b / det, a / det], reach));
     }
     footprints.sort_by(|p, q| p.0.total_cmp(&q.0));
 
     let mut labels = vec![0.0f32; width * height * channels];
     let mut transmittance = vec![1.0f32; width * height];
-    for &(_, g, uv, conic) in &footprints {
+    for &(_, g, uv, conic, reach) in &footprints {
         let opacity = sigmoid(splats.raw_opacities[g]) as f64;
         let probabilities: Vec<f32> = splats.labels_of(g).iter().map(|&l| sigmoid(l)).collect();
-        let det = conic[0] * conic[2] - conic[1] * conic[1];
-        // Extent from the covariance's diagonal: conic⁻¹ = [c, -b; -b, a] / det.
-        let (var_u, var_v) = (conic[2] / det, conic[0] / det);
-        let reach_u = FOOTPRINT_SIGMAS * var_u.sqrt();
-        let reach_v = FOOTPRINT_SIGMAS * var_v.sqrt();
+        let (reach_u, reach_v) = (reach.x, reach.y);
         let x0 = (((uv.x - reach_u - lower.x) / cell).floor().max(0.0)) as usize;
         let y0 = (((uv.y - reach_v - lower.y) / cell).floor().max(0.0)) as usize;
         let x1 = (((uv.x + reach_u - lower.x) / cell).ceil().max(0.0) as usize).min(width);
