@@ -85,6 +85,20 @@ pub enum Command {
         iterations: u32,
     },
     CancelRefine,
+    /// Show survey `index` of the open project (its model and photos; the camera stays).
+    ShowSurvey(usize),
+    /// Show survey `index` beside the one shown, with the same camera (None: stop comparing).
+    CompareSurvey(Option<usize>),
+    /// Find the shown survey's new damage against the twin before it (change maps).
+    DetectChanges,
+    /// Update the twin with the shown survey's photos and masks (its model is written).
+    UpdateTwin {
+        strategy: crate::damage::refine::Strategy,
+        iterations: u32,
+    },
+    CancelTimelineJob,
+    /// Snapping to a view shows its change map instead of its photo.
+    ShowChangeMaps(bool),
     /// Undo or redo the last selection, visibility or damage-class edit.
     Undo,
     Redo,

@@ -7,6 +7,7 @@ pub mod commands;
 pub mod cpu_view;
 pub mod demo;
 pub mod files;
+pub mod frame_log;
 pub mod overlay;
 pub mod panels;
 pub mod resolution;
@@ -25,8 +26,8 @@ use std::sync::Arc;
 use crate::app::commands::{Command, DialogKind};
 use crate::app::demo::DemoPreparation;
 use crate::app::panels::{
-    ChartsPanel, LogPanel, ProjectPanel, RegionsPanel, SelectionPanel, StatsPanel, TrainingPanel,
-    ViewPanel,
+    ChartsPanel, LogPanel, ProjectPanel, RegionsPanel, SelectionPanel, StatsPanel, TimelinePanel,
+    TrainingPanel, ViewPanel,
 };
 use crate::app::settings::Settings;
 use crate::app::state::AppState;
@@ -88,6 +89,7 @@ pub struct TwinApp {
     selection: SelectionPanel,
     regions: RegionsPanel,
     charts: ChartsPanel,
+    timeline: TimelinePanel,
     log: LogPanel,
     commands: Vec<Command>,
     demo: Option<DemoPreparation>,
@@ -116,6 +118,7 @@ impl TwinApp {
             selection: SelectionPanel::default(),
             regions: RegionsPanel,
             charts: ChartsPanel,
+            timeline: TimelinePanel::default(),
             log: LogPanel,
             commands: Vec::new(),
             demo: None,
@@ -287,12 +290,22 @@ impl eframe::App for TwinApp {
             .resizable(true)
             .default_size(90.0)
             .show(ui, |ui| self.log.ui(ui, state, commands));
+        if state.timeline.is_some() {
+            egui::Panel::bottom("timeline")
+                .resizable(false)
+                .show(ui, |ui| self.timeline.ui(ui, state, commands));
+        }
         egui::CentralPanel::no_frame().show(ui, |ui| {
             self.viewport.ui(ui, &mut self.state, &mut self.commands);
         });
         if self.demo.is_some()
             || self.state.measuring
             || self.state.refine.is_some()
+            || self
+                .state
+                .timeline
+                .as_ref()
+                .is_some_and(|t| t.job.is_some() || !t.loading.is_empty())
             || self.state.training.as_ref().is_some_and(|t| t.is_running())
         {
             // Keep polling the workers while they run (events arrive between input events), as

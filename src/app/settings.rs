@@ -30,6 +30,16 @@ pub enum CompareMode {
     SideBySide,
 }
 
+/// How two surveys are compared in the viewport (the same camera drives both).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum SurveyLayout {
+    /// Two viewports: the compared survey left, the one shown right.
+    #[default]
+    SideBySide,
+    /// One viewport split by a handle: the compared survey left of it, the one shown right.
+    Swipe,
+}
+
 /// Which renderer draws the splats in the viewport.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 pub enum ViewportRenderer {
@@ -67,6 +77,8 @@ pub struct Settings {
     pub min_render_scale: f32,
     pub viewport_renderer: ViewportRenderer,
     pub compare_mode: CompareMode,
+    /// How two surveys are compared.
+    pub survey_layout: SurveyLayout,
     /// Photo opacity in blend mode.
     pub compare_blend: f32,
     pub training: TrainingSettings,
@@ -104,6 +116,7 @@ impl Default for Settings {
             min_render_scale: 0.25,
             viewport_renderer: ViewportRenderer::Auto,
             compare_mode: CompareMode::Swipe,
+            survey_layout: SurveyLayout::SideBySide,
             compare_blend: 0.5,
             training: TrainingSettings::default(),
             damage: DamageLayer::default(),

@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex};
 use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait, ScreenDescriptor};
 
 use crate::app::settings::Settings;
+use crate::damage::layer::DamageLayer;
 use crate::gpu::{GpuContext, GpuRenderSettings, GpuRenderer};
 use crate::scene::Camera;
 use crate::splats::Splats;
@@ -56,12 +57,10 @@ struct UploadKey {
     damage: crate::damage::layer::DamageLayer,
 }
 
-/// GPU state kept in egui-wgpu's callback resources (one per app).
-struct SplatResources {
+/// One picture's GPU state: its renderer (model, output texture) and what it last drew. The
+/// viewport draws one picture, or two when comparing surveys (slot 1 is made on first use).
+struct Slot {
     renderer: GpuRenderer,
-    pipeline: wgpu::RenderPipeline,
-    layout: wgpu::BindGroupLayout,
-    sampler: wgpu::Sampler,
     bind_group: Option<(u64, wgpu::BindGroup)>,
     uploaded: Option<UploadKey>,
     /// The output texture holds a render of this frame's request (paint draws nothing else).
@@ -69,6 +68,30 @@ struct SplatResources {
     /// What the output texture shows: an identical request is not rendered again (on a software
     /// driver a repaint for the UI alone must not pay for a splat render).
     last_render: Option<(UploadKey, Camera, GpuRenderSettings)>,
+}
+
+impl Slot {
+    fn new(renderer: GpuRenderer) -> Slot {
+        Slot {
+            renderer,
+            bind_group: None,
+            uploaded: None,
+            rendered: false,
+            last_render: None,
+        }
+    }
+}
+
+/// How many pictures the viewport draws at most (the model, and a survey beside it).
+pub const SLOTS: usize = 2;
+
+/// GPU state kept in egui-wgpu's callback resources (one per app).
+struct SplatResources {
+    ctx: GpuContext,
+    slots: Vec<Slot>,
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
     error: Arc<Mutex<Option<String>>>,
 }
 
@@ -157,14 +180,11 @@ pub fn install(
         .write()
         .callback_resources
         .insert(SplatResources {
-            renderer,
+            ctx,
+            slots: vec![Slot::new(renderer)],
             pipeline,
             layout,
             sampler,
-            bind_group: None,
-            uploaded: None,
-            rendered: false,
-            last_render: None,
             error: error.clone(),
         });
     Ok(error)
@@ -172,6 +192,7 @@ pub fn install(
 
 /// One frame's request.
 struct SplatCallback {
+    slot: usize,
     splats: Arc<Splats>,
     key: UploadKey,
     camera: Camera,
@@ -190,39 +211,52 @@ impl CallbackTrait for SplatCallback {
         let Some(res) = resources.get_mut::<SplatResources>() else {
             return Vec::new();
         };
+        while res.slots.len() <= self.slot.min(SLOTS - 1) {
+            match GpuRenderer::new(&res.ctx) {
+                Ok(renderer) => res.slots.push(Slot::new(renderer)),
+                Err(e) => {
+                    if let Ok(mut error) = res.error.lock() {
+                        *error = Some(format!("GPU renderer: {e}"));
+                    }
+                    return Vec::new();
+                }
+            }
+        }
+        let (layout, sampler) = (&res.layout, &res.sampler);
+        let slot = &mut res.slots[self.slot.min(SLOTS - 1)];
         let request = (self.key.clone(), self.camera, self.settings);
-        if res.rendered && res.last_render.as_ref() == Some(&request) {
+        if slot.rendered && slot.last_render.as_ref() == Some(&request) {
             return Vec::new();
         }
-        res.rendered = false;
-        res.last_render = None;
+        slot.rendered = false;
+        slot.last_render = None;
         let result = (|| -> Result<(), String> {
-            if res.uploaded.as_ref() != Some(&self.key) {
+            if slot.uploaded.as_ref() != Some(&self.key) {
                 let shown = crate::damage::layer::display_splats(
                     &self.splats,
                     self.key.splat_scale,
                     &self.key.damage,
                 );
-                res.renderer.upload(&shown).map_err(|e| e.to_string())?;
-                res.uploaded = Some(self.key.clone());
+                slot.renderer.upload(&shown).map_err(|e| e.to_string())?;
+                slot.uploaded = Some(self.key.clone());
             }
             if self.splats.is_empty() {
                 return Ok(());
             }
-            let view = res
+            let view = slot
                 .renderer
                 .render(egui_encoder, &self.camera, &self.settings)
                 .map_err(|e| e.to_string())?
                 .clone();
-            let generation = res.renderer.output_generation();
-            if res
+            let generation = slot.renderer.output_generation();
+            if slot
                 .bind_group
                 .as_ref()
                 .is_none_or(|(g, _)| *g != generation)
             {
                 let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("damage-twin blit"),
-                    layout: &res.layout,
+                    layout,
                     entries: &[
                         wgpu::BindGroupEntry {
                             binding: 0,
@@ -230,18 +264,18 @@ impl CallbackTrait for SplatCallback {
                         },
                         wgpu::BindGroupEntry {
                             binding: 1,
-                            resource: wgpu::BindingResource::Sampler(&res.sampler),
+                            resource: wgpu::BindingResource::Sampler(sampler),
                         },
                     ],
                 });
-                res.bind_group = Some((generation, bind_group));
+                slot.bind_group = Some((generation, bind_group));
             }
-            res.rendered = true;
-            res.last_render = Some(request);
+            slot.rendered = true;
+            slot.last_render = Some(request);
             Ok(())
         })();
-        if let Ok(mut slot) = res.error.lock() {
-            *slot = result.err();
+        if let Ok(mut error) = res.error.lock() {
+            *error = result.err();
         }
         Vec::new()
     }
@@ -255,7 +289,10 @@ impl CallbackTrait for SplatCallback {
         let Some(res) = resources.get::<SplatResources>() else {
             return;
         };
-        let Some((_, bind_group)) = res.bind_group.as_ref().filter(|_| res.rendered) else {
+        let Some(slot) = res.slots.get(self.slot) else {
+            return;
+        };
+        let Some((_, bind_group)) = slot.bind_group.as_ref().filter(|_| slot.rendered) else {
             return;
         };
         render_pass.set_pipeline(&res.pipeline);
@@ -269,8 +306,9 @@ impl CallbackTrait for SplatCallback {
 pub struct SplatView {
     /// Set once `install` ran: the renderer's error slot, or why there is no renderer.
     installed: Option<Result<Arc<Mutex<Option<String>>>, String>>,
-    /// The last request queued, to tell frames that render from frames that reuse the picture.
-    last_request: Option<(UploadKey, Camera, GpuRenderSettings)>,
+    /// Per slot, the last request queued, to tell frames that render from frames that reuse
+    /// the picture.
+    last_request: [Option<(UploadKey, Camera, GpuRenderSettings)>; SLOTS],
     /// eframe's adapter is a CPU implementation (lavapipe, llvmpipe).
     software: bool,
 }
@@ -308,26 +346,32 @@ impl SplatView {
     }
 
     /// Queues the splats for drawing into `rect` with `camera` (its intrinsics set the render
-    /// resolution; the output is stretched over `rect`). Returns true when this frame renders, false
-    /// when the request is the last one again and the picture is reused.
+    /// resolution; the output is stretched over `rect`) in picture `slot` (below [`SLOTS`]), with
+    /// `damage` as the damage layer. Returns true when this frame renders, false when the request
+    /// is the last one again and the picture is reused.
+    #[allow(clippy::too_many_arguments)]
     pub fn paint(
         &mut self,
-        ui: &egui::Ui,
+        painter: &egui::Painter,
+        slot: usize,
         rect: egui::Rect,
         camera: &Camera,
         splats: &Arc<Splats>,
         generation: u64,
         settings: &Settings,
+        damage: &DamageLayer,
     ) -> bool {
         if !self.is_available() {
             return false;
         }
+        let slot = slot.min(SLOTS - 1);
         let callback = SplatCallback {
+            slot,
             splats: splats.clone(),
             key: UploadKey {
                 generation,
                 splat_scale: settings.splat_scale,
-                damage: settings.damage.clone(),
+                damage: damage.clone(),
             },
             camera: *camera,
             settings: GpuRenderSettings {
@@ -337,10 +381,9 @@ impl SplatView {
             },
         };
         let request = (callback.key.clone(), callback.camera, callback.settings);
-        let renders = !splats.is_empty() && self.last_request.as_ref() != Some(&request);
-        self.last_request = Some(request);
-        ui.painter()
-            .add(egui_wgpu::Callback::new_paint_callback(rect, callback));
+        let renders = !splats.is_empty() && self.last_request[slot].as_ref() != Some(&request);
+        self.last_request[slot] = Some(request);
+        painter.add(egui_wgpu::Callback::new_paint_callback(rect, callback));
         renders
     }
 }

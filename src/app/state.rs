@@ -3,7 +3,7 @@
 //! back through channels drained with `try_recv` in `poll`, so nothing here ever blocks the UI.
 
 use std::collections::VecDeque;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 
 use crossbeam_channel::{Receiver, Sender};
@@ -24,8 +24,11 @@ use crate::train::history::History;
 
 mod editing;
 mod refining;
+mod saving;
+mod timeline;
 
 pub use refining::RefineSession;
+pub use timeline::{LoadedSurvey, TimelineJob, TimelineView, TimelineWork, survey_dataset};
 
 /// Most log lines kept for the log panel.
 const LOG_LINES: usize = 200;
@@ -55,7 +58,11 @@ pub enum Photo {
 pub struct Snap {
     pub view: usize,
     pub camera: Camera,
+    /// The view's photo, or its change map.
     pub photo: Photo,
+    /// `photo` is the view's change map (old damage in class colours, new in the new-damage
+    /// colour).
+    pub change_map: bool,
 }
 
 /// Results of worker threads (everything the UI must not wait for).
@@ -66,6 +73,18 @@ pub enum WorkerResult {
         dataset: Option<Arc<Dataset>>,
         splats: Option<Arc<Splats>>,
         project_dir: Option<PathBuf>,
+    },
+    /// A twin project opened, showing survey `survey`.
+    OpenedProject {
+        source: PathBuf,
+        twin: Box<Twin>,
+        survey: usize,
+        loaded: LoadedSurvey,
+    },
+    /// A survey of the open project read for stepping or comparing.
+    SurveyLoaded {
+        index: usize,
+        result: Result<LoadedSurvey, String>,
     },
     Photo {
         view: usize,
@@ -105,6 +124,8 @@ pub struct AppState {
     pub edits: EditHistory,
     /// A refinement of the selection, while it runs.
     pub refine: Option<RefineSession>,
+    /// The open project's surveys (a twin project, not a bare dataset or model).
+    pub timeline: Option<TimelineView>,
     pub log: VecDeque<String>,
     /// Viewport size in pixels, as last laid out (for PNG export at screen size).
     pub viewport_pixels: [u32; 2],
@@ -135,6 +156,7 @@ impl AppState {
             measuring: false,
             edits: EditHistory::default(),
             refine: None,
+            timeline: None,
             log: VecDeque::new(),
             viewport_pixels: [960, 540],
             frame_stats: FrameStats::default(),
@@ -197,6 +219,7 @@ impl AppState {
             self.on_worker_result(result);
         }
         changed |= self.poll_refine();
+        changed |= self.poll_timeline();
         if let Some(session) = &mut self.training {
             let update = session.poll(&mut self.history);
             if update.changed {
@@ -223,6 +246,22 @@ impl AppState {
             } => {
                 self.on_opened(source, dataset, splats, project_dir);
             }
+            WorkerResult::OpenedProject {
+                source,
+                twin,
+                survey,
+                loaded,
+            } => {
+                let dir = twin.dir().to_path_buf();
+                self.on_opened(
+                    source,
+                    loaded.dataset.clone(),
+                    loaded.splats.clone(),
+                    Some(dir),
+                );
+                self.timeline = Some(TimelineView::new(*twin, survey, loaded));
+            }
+            WorkerResult::SurveyLoaded { index, result } => self.on_survey_loaded(index, result),
             WorkerResult::Photo { view, result } => {
                 if let Some(snap) = &mut self.snap
                     && snap.view == view
@@ -260,6 +299,10 @@ impl AppState {
         project_dir: Option<PathBuf>,
     ) {
         self.stop_training();
+        // Whatever the project's timeline was running belongs to the project that is closing.
+        if let Some(job) = self.timeline.take().and_then(|t| t.job) {
+            job.cancel();
+        }
         self.snap = None;
         self.regions = None;
         self.history.clear();
@@ -352,11 +395,15 @@ impl AppState {
                 Some(splats) => {
                     let [w, h] = self.viewport_pixels;
                     let camera = self.view_camera(w, h);
+                    let mut settings = self.settings.clone();
+                    if let Some(t) = &self.timeline {
+                        settings.damage = t.layer(&settings.damage, t.current);
+                    }
                     workers::export_png(
                         path,
                         splats.clone(),
                         camera,
-                        self.settings.clone(),
+                        settings,
                         self.results_sender(),
                     );
                 }
@@ -421,6 +468,22 @@ impl AppState {
                 iterations,
             } => self.start_refine(strategy, iterations),
             Command::CancelRefine => self.cancel_refine(),
+            Command::ShowSurvey(index) => self.show_survey(index),
+            Command::CompareSurvey(index) => self.compare_survey(index),
+            Command::DetectChanges => self.detect_changes(),
+            Command::UpdateTwin {
+                strategy,
+                iterations,
+            } => self.update_twin(strategy, iterations),
+            Command::CancelTimelineJob => self.cancel_timeline_job(),
+            Command::ShowChangeMaps(on) => {
+                if let Some(t) = &mut self.timeline {
+                    t.show_change_maps = on;
+                }
+                if let Some(view) = self.snap.as_ref().map(|s| s.view) {
+                    self.snap_to(view);
+                }
+            }
             Command::Undo => self.undo_redo(false),
             Command::Redo => self.undo_redo(true),
             Command::Unsnap => {
@@ -456,63 +519,7 @@ impl AppState {
         }
     }
 
-    fn save_project(&mut self, dir: &Path) {
-        let Some(splats) = self.splats.clone() else {
-            self.log_line("nothing to save yet: no model");
-            return;
-        };
-        let dataset_root = self
-            .scene
-            .as_ref()
-            .and_then(|s| s.dataset.as_ref())
-            .map(|d| d.root.clone());
-        let result = self.save_twin(dir, dataset_root.as_deref(), &splats);
-        let ok = result.is_ok();
-        self.report(result, &format!("saved the twin to {}", dir.display()));
-        if ok && let Some(scene) = &mut self.scene {
-            scene.project_dir = Some(dir.to_path_buf());
-        }
-    }
-
-    /// The twin project in `dir` with the model on screen saved as its survey's model, the
-    /// damage colours, background and training scale as its settings, and the last finished
-    /// run's figures as that survey's metrics.
-    fn save_twin(
-        &self,
-        dir: &Path,
-        dataset_root: Option<&Path>,
-        splats: &Splats,
-    ) -> anyhow::Result<()> {
-        use crate::scene::project::{ClassStyle, ProjectSettings};
-        let mut twin = Twin::open_or_create(dir)?;
-        twin.project.classes = crate::damage::DamageClass::ALL
-            .iter()
-            .zip(self.settings.damage.colours)
-            .map(|(&class, colour)| ClassStyle { class, colour })
-            .collect();
-        twin.project.settings = ProjectSettings {
-            background: self.settings.background,
-            scale: crate::scene::ImageScale::Factor(self.settings.training.resolution_factor),
-            ..twin.project.settings.clone()
-        };
-        let survey = twin.save_survey_model(dataset_root, splats)?;
-        if let Some(outcome) = self.training.as_ref().and_then(|t| t.outcome.as_ref()) {
-            let metrics = serde_json::json!({
-                "heldout_psnr": outcome.heldout.as_ref().map(|s| s.psnr),
-                "heldout_ssim": outcome.heldout.as_ref().map(|s| s.ssim),
-                "gaussians": outcome.splats.len(),
-                "iterations": outcome.steps,
-                "seconds": outcome.seconds,
-                "mode": self.settings.training.mode,
-                "resolution_factor": self.settings.training.resolution_factor,
-            });
-            twin.save_metrics(&survey, &metrics)?;
-            twin.save()?;
-        }
-        Ok(())
-    }
-
-    fn snap_to(&mut self, index: usize) {
+    pub(super) fn snap_to(&mut self, index: usize) {
         let Some(dataset) = self.scene.as_ref().and_then(|s| s.dataset.clone()) else {
             return;
         };
@@ -520,12 +527,21 @@ impl AppState {
             self.log_line(format!("no survey view {index}"));
             return;
         };
+        let change_map = self
+            .timeline
+            .as_ref()
+            .filter(|t| t.show_change_maps)
+            .and_then(|t| t.change_map(&view.name));
         self.snap = Some(Snap {
             view: index,
             camera: view.camera,
             photo: Photo::Loading,
+            change_map: change_map.is_some(),
         });
-        workers::load_photo(dataset, index, self.results_sender());
+        match change_map {
+            Some(path) => workers::load_picture(path, index, self.results_sender()),
+            None => workers::load_photo(dataset, index, self.results_sender()),
+        }
     }
 
     fn start_training(&mut self) {

@@ -3,22 +3,26 @@
 //! the grid, the survey frusta (click one to snap to it) and the photo comparison on top.
 //! The camera is view state and changes here directly; everything else goes through commands.
 
+mod pictures;
+
 use std::sync::Arc;
 
 use glam::{Vec2, Vec3};
 
 use crate::app::camera_controller::CameraInput;
 use crate::app::commands::Command;
-use crate::app::cpu_view::{CpuView, ViewRequest, color_image};
+use crate::app::cpu_view::{CpuView, color_image};
+use crate::app::frame_log::FrameLog;
 use crate::app::overlay::{self, SegmentKind};
 use crate::app::resolution::{AdaptiveResolution, FrameSample, scaled_size};
-use crate::app::settings::CompareMode;
 use crate::app::settings::ViewportRenderer;
-use crate::app::splat_view::SplatView;
+use crate::app::settings::{CompareMode, SurveyLayout};
+use crate::app::splat_view::{SLOTS, SplatView};
 use crate::app::state::{AppState, Photo};
 use crate::app::tools::ToolState;
 use crate::scene::{Camera, RgbImage};
 use crate::splats::selection::SetOp;
+use pictures::Picture;
 
 /// Frame statistics the statistics panel shows.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -51,97 +55,13 @@ pub struct Viewport {
     frame_log: FrameLog,
     /// The last frame rendered splats (its time then measures the render).
     rendered_last_frame: bool,
-    /// The CPU renderer's worker, started on first use (software drivers, or by choice).
-    cpu_view: Option<Result<CpuView, String>>,
+    /// The CPU renderer's workers, one per picture, started on first use (software drivers, or
+    /// by choice).
+    cpu_views: [Option<Result<CpuView, String>>; SLOTS],
+    /// Swipe handle between two surveys, in [0, 1] of the viewport width.
+    survey_swipe: f32,
     /// The selection tool and the shape being drawn.
     pub tools: ToolState,
-}
-
-/// With `DAMAGE_TWIN_FRAME_STATS=1`, prints frame-time statistics every 5 s to stderr (how the
-/// frame times in the docs were measured): all frames, and separately the frames that rendered
-/// splats (the others only redrew the panels and reused the picture).
-struct FrameLog {
-    enabled: bool,
-    frames_ms: Vec<f32>,
-    render_frames_ms: Vec<f32>,
-    scales: Vec<f32>,
-    /// Why egui repainted ("file:line reason" → frames), to find what keeps frames coming.
-    repaint_causes: std::collections::BTreeMap<String, usize>,
-    since: std::time::Instant,
-}
-
-impl Default for FrameLog {
-    fn default() -> Self {
-        FrameLog {
-            enabled: std::env::var_os("DAMAGE_TWIN_FRAME_STATS").is_some_and(|v| v != "0"),
-            frames_ms: Vec::new(),
-            render_frames_ms: Vec::new(),
-            scales: Vec::new(),
-            repaint_causes: std::collections::BTreeMap::new(),
-            since: std::time::Instant::now(),
-        }
-    }
-}
-
-/// "n frames, median …, p95 …, max …" of a list of frame times.
-fn frame_summary(frames_ms: &[f32]) -> String {
-    if frames_ms.is_empty() {
-        return "0 frames".into();
-    }
-    let mut sorted = frames_ms.to_vec();
-    sorted.sort_by(f32::total_cmp);
-    let n = sorted.len();
-    format!(
-        "{n} frames, median {:.1} ms, p95 {:.1} ms, max {:.1} ms",
-        sorted[n / 2],
-        sorted[(n * 95 / 100).min(n - 1)],
-        sorted[n - 1],
-    )
-}
-
-impl FrameLog {
-    /// A CPU-worker render's own time (its pictures arrive between UI frames).
-    fn record_render(&mut self, render_ms: f32) {
-        if self.enabled && render_ms > 0.0 {
-            self.render_frames_ms.push(render_ms);
-        }
-    }
-
-    /// `frame_ms` is the last frame's time; `rendered` says whether that frame rendered splats.
-    fn record(&mut self, ctx: &egui::Context, frame_ms: f32, scale: f32, rendered: bool) {
-        if !self.enabled || !(frame_ms > 0.0) {
-            return;
-        }
-        for cause in ctx.repaint_causes() {
-            *self.repaint_causes.entry(cause.to_string()).or_default() += 1;
-        }
-        self.frames_ms.push(frame_ms);
-        if rendered {
-            self.render_frames_ms.push(frame_ms);
-        }
-        self.scales.push(scale);
-        let seconds = self.since.elapsed().as_secs_f32();
-        if seconds < 5.0 {
-            return;
-        }
-        let mean_scale = self.scales.iter().sum::<f32>() / self.scales.len() as f32;
-        eprintln!(
-            "frames in {seconds:.1} s: all {}; splat renders {}; mean render scale {mean_scale:.2}",
-            frame_summary(&self.frames_ms),
-            frame_summary(&self.render_frames_ms),
-        );
-        let mut causes: Vec<_> = std::mem::take(&mut self.repaint_causes)
-            .into_iter()
-            .collect();
-        causes.sort_by_key(|(_, frames)| std::cmp::Reverse(*frames));
-        for (cause, frames) in causes.iter().take(4) {
-            eprintln!("  repaint cause ({frames} frames): {cause}");
-        }
-        self.frames_ms.clear();
-        self.render_frames_ms.clear();
-        self.scales.clear();
-        self.since = std::time::Instant::now();
-    }
 }
 
 /// Reads navigation input for this frame (keys only when no text field has focus).
@@ -209,9 +129,14 @@ impl Viewport {
     /// The GPU renderer's last error, or why there is none (or why the CPU renderer could not
     /// start).
     pub fn renderer_error(&self) -> Option<String> {
-        match &self.cpu_view {
-            Some(Err(e)) => Some(e.clone()),
-            _ => self.splat_view.error(),
+        match self
+            .cpu_views
+            .iter()
+            .flatten()
+            .find_map(|v| v.as_ref().err())
+        {
+            Some(e) => Some(e.clone()),
+            None => self.splat_view.error(),
         }
     }
 
@@ -270,6 +195,13 @@ impl Viewport {
             (k.width as f32, k.height as f32)
         });
         let compare = state.settings.compare_mode;
+        // A second survey beside the one shown (not while looking through a survey camera).
+        let compared = state
+            .timeline
+            .as_ref()
+            .filter(|_| state.snap.is_none())
+            .and_then(|t| t.compared());
+        let side_by_side = state.settings.survey_layout == SurveyLayout::SideBySide;
         let (render_rect, photo_rect) = match snap_aspect {
             Some((w, h)) if compare == CompareMode::SideBySide => {
                 let (left, right) = full.split_left_right_at_fraction(0.5);
@@ -279,23 +211,41 @@ impl Viewport {
                 let r = fit_aspect(full, w, h);
                 (r, Some(r))
             }
+            None if compared.is_some() && side_by_side => {
+                (full.split_left_right_at_fraction(0.5).1, None)
+            }
             None => (full, None),
         };
 
         let frame_ms = ui.input(|i| i.unstable_dt) * 1000.0;
         let moving = input.is_active() || state.camera.is_moving();
         let use_cpu = self.uses_cpu_renderer(state.settings.viewport_renderer);
-        if use_cpu && self.cpu_view.is_none() {
-            self.cpu_view = Some(CpuView::start(ui.ctx()));
+        let pictures = if compared.is_some() { 2 } else { 1 };
+        if use_cpu {
+            for view in self.cpu_views.iter_mut().take(pictures) {
+                if view.is_none() {
+                    *view = Some(CpuView::start(ui.ctx()));
+                }
+            }
         }
-        // The CPU worker's pictures arrive between frames and carry their own render time: the
+        // The CPU workers' pictures arrive between frames and carry their own render time: the
         // UI frames around them say nothing about what a render costs.
-        let (sample_ms, sample_rendered) = match (&mut self.cpu_view, use_cpu) {
-            (Some(Ok(view)), true) => match view.receive(ui.ctx()) {
-                Some(render_ms) => (render_ms, true),
-                None => (frame_ms, false),
-            },
-            _ => (frame_ms, self.rendered_last_frame),
+        let received: Option<f32> = if use_cpu {
+            self.cpu_views
+                .iter_mut()
+                .take(pictures)
+                .filter_map(|v| match v {
+                    Some(Ok(view)) => view.receive(ui.ctx()),
+                    _ => None,
+                })
+                .reduce(f32::max)
+        } else {
+            None
+        };
+        let (sample_ms, sample_rendered) = match received {
+            Some(render_ms) => (render_ms, true),
+            None if use_cpu => (frame_ms, false),
+            None => (frame_ms, self.rendered_last_frame),
         };
         // While training streams new models, every snapshot is a render: keep those within
         // the budget too, or a resting camera would render each one at full resolution.
@@ -331,34 +281,45 @@ impl Viewport {
 
         self.rendered_last_frame = false;
         if let Some(splats) = &state.splats {
-            match &mut self.cpu_view {
-                Some(Ok(view)) if use_cpu => {
-                    view.request(
-                        ViewRequest {
-                            generation: state.splats_generation,
-                            camera,
-                            splat_scale: state.settings.splat_scale,
-                            damage: state.settings.damage.clone(),
-                            background: state.settings.background,
-                        },
-                        splats,
-                    );
-                    if let Some(texture) = view.texture() {
-                        let uv =
-                            egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0));
-                        painter.image(texture.id(), render_rect, uv, egui::Color32::WHITE);
-                    }
-                }
-                _ => {
-                    self.rendered_last_frame = self.splat_view.paint(
-                        ui,
-                        render_rect,
-                        &camera,
-                        splats,
-                        state.splats_generation,
-                        &state.settings,
-                    );
-                }
+            let layer = match &state.timeline {
+                Some(t) => t.layer(&state.settings.damage, t.current),
+                None => state.settings.damage.clone(),
+            };
+            let shown = Picture {
+                splats,
+                generation: state.splats_generation,
+                layer: &layer,
+            };
+            self.rendered_last_frame = self.draw_picture(
+                &painter,
+                0,
+                render_rect,
+                render_rect,
+                &camera,
+                &shown,
+                state,
+                use_cpu,
+            );
+            if let (Some((index, other)), Some(t)) = (&compared, &state.timeline) {
+                let layer = t.layer(&state.settings.damage, *index);
+                let other = Picture {
+                    splats: other,
+                    generation: t.compare_generation,
+                    layer: &layer,
+                };
+                let (rect, clip) = if side_by_side {
+                    let left = full.split_left_right_at_fraction(0.5).0;
+                    (left, left)
+                } else {
+                    let x = full.min.x + self.survey_swipe() * full.width();
+                    (
+                        full,
+                        egui::Rect::from_min_max(full.min, egui::pos2(x, full.max.y)),
+                    )
+                };
+                self.rendered_last_frame |=
+                    self.draw_picture(&painter, 1, rect, clip, &camera, &other, state, use_cpu);
+                self.draw_survey_labels(ui, &painter, full, render_rect, *index, state);
             }
         } else {
             painter.text(
@@ -388,7 +349,17 @@ impl Viewport {
             render_rect.width().max(1.0) as u32,
             render_rect.height().max(1.0) as u32,
         );
-        self.draw_overlays(&painter, render_rect, &overlay_camera, state);
+        self.draw_overlays(
+            &painter.with_clip_rect(render_rect),
+            render_rect,
+            &overlay_camera,
+            state,
+        );
+        if compared.is_some() && side_by_side {
+            // The compared survey's picture has the same camera, grid and frusta.
+            let left = full.split_left_right_at_fraction(0.5).0;
+            self.draw_overlays(&painter.with_clip_rect(left), left, &overlay_camera, state);
+        }
         self.tools.keys(ui.ctx(), &overlay_camera, commands);
         let op = ui.input(|i| SetOp::from_modifiers(i.modifiers.shift, i.modifiers.command));
         let tool_used =
@@ -596,7 +567,14 @@ impl Viewport {
         painter.text(
             render_rect.left_top() + egui::vec2(8.0, 8.0),
             egui::Align2::LEFT_TOP,
-            format!("{name}: photo | render  (drag or scroll in the view to leave)"),
+            format!(
+                "{name}: {} | render  (drag or scroll in the view to leave)",
+                if snap.change_map {
+                    "change map"
+                } else {
+                    "photo"
+                }
+            ),
             egui::FontId::proportional(13.0),
             egui::Color32::WHITE,
         );

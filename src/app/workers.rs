@@ -11,7 +11,7 @@ use crossbeam_channel::Sender;
 use crate::app::commands::{Command, DialogKind};
 use crate::app::files::{self, OpenTarget};
 use crate::app::settings::Settings;
-use crate::app::state::WorkerResult;
+use crate::app::state::{LoadedSurvey, WorkerResult};
 use crate::scene::open::OpenOptions;
 use crate::scene::{Camera, Dataset, ImageScale, ply};
 use crate::splats::Splats;
@@ -62,25 +62,31 @@ pub fn open_blocking(path: &Path) -> anyhow::Result<WorkerResult> {
         }
         OpenTarget::Project(file) => {
             let twin = Twin::open(&file)?;
-            // The latest survey is the one the twin shows.
-            let survey = twin.latest()?.clone();
-            let dataset = if survey.dataset.as_os_str().is_empty() {
-                None
-            } else {
-                let root = twin.resolve(&survey.dataset);
-                let options = OpenOptions {
-                    background: twin.project.settings.background,
-                };
-                Some(Arc::new(Dataset::open(&root, &options).with_context(
-                    || format!("opening survey {} at {}", survey.name, root.display()),
-                )?))
-            };
-            let splats = twin.load_model(&survey.name)?.map(Arc::new);
-            Ok(WorkerResult::Opened {
+            // The survey shown when the project was saved from the viewer, else the latest that
+            // has a model. A project without surveys is refused here.
+            twin.latest()?;
+            let surveys = &twin.project.surveys;
+            let survey = twin
+                .project
+                .settings
+                .shown_survey
+                .as_deref()
+                .and_then(|name| twin.survey_index(name).ok())
+                .or_else(|| surveys.iter().rposition(|s| s.model.is_some()))
+                .unwrap_or(surveys.len() - 1);
+            let name = twin.project.surveys[survey].name.clone();
+            let dataset = crate::app::state::survey_dataset(&twin, &name)
+                .with_context(|| format!("opening survey {name}"))?;
+            let splats = twin.load_model(&name)?.map(Arc::new);
+            Ok(WorkerResult::OpenedProject {
                 source: file,
-                dataset,
-                splats,
-                project_dir: Some(twin.dir().to_path_buf()),
+                twin: Box::new(twin),
+                survey,
+                loaded: LoadedSurvey {
+                    splats,
+                    dataset,
+                    edited: false,
+                },
             })
         }
     }
@@ -152,6 +158,19 @@ pub fn load_photo(dataset: Arc<Dataset>, index: usize, results: Sender<WorkerRes
             .load_view(index, scale)
             .or_else(|_| dataset.load_view(index, ImageScale::Factor(1)))
             .map(|v| Arc::new(v.image))
+            .map_err(|e| e.to_string());
+        let _ = results.send(WorkerResult::Photo {
+            view: index,
+            result,
+        });
+    });
+}
+
+/// Loads a picture file (a change map) as view `index`'s comparison picture.
+pub fn load_picture(path: PathBuf, index: usize, results: Sender<WorkerResult>) {
+    spawn("damage-twin-picture", move || {
+        let result = crate::scene::load::load_image(&path)
+            .map(Arc::new)
             .map_err(|e| e.to_string());
         let _ = results.send(WorkerResult::Photo {
             view: index,

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 
 use damage_twin::damage::display::{DisplayStyle, png_bytes, render_view};
-use damage_twin::damage::layer::display_by_survey;
+use damage_twin::damage::layer::{EARLIER_DAMAGE, display_by_survey};
 use damage_twin::damage::measure::MeasureConfig;
 use damage_twin::report::inspection::{
     Figure, InspectionReport, ReportSettings, TruthTotals, report_html,
@@ -32,9 +32,6 @@ pub struct Args {
     #[arg(long, default_value_t = 2)]
     pub downscale: u32,
 }
-
-/// Damage first seen before the latest survey, in the by-survey renders.
-const EARLIER_DAMAGE: [u8; 3] = [70, 130, 255];
 
 fn colour_name(colour: [u8; 3]) -> String {
     match colour {
@@ -64,6 +61,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut truth = BTreeMap::new();
     let mut figures = Vec::new();
     for s in &surveys {
+        let own_survey = twin.survey_index(&s.survey)?;
         let dataset = twin.open_survey_dataset(&s.survey)?;
         let truth_file = dataset.root.join("truth").join("quantities.json");
         if truth_file.is_file() {
@@ -88,7 +86,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ..DisplayStyle::default()
         };
         style.damage.enabled = true;
-        let by_survey = display_by_survey(&splats, &survey_colours);
+        let by_survey = display_by_survey(&splats, &survey_colours, own_survey as u16);
         let mut plain = style.clone();
         plain.damage.enabled = false;
         let count = args.views.min(dataset.views.len());

@@ -26,6 +26,29 @@ pub struct DamageLayer {
     pub visible: [bool; 3],
     /// Per class colour (sRGB), in `DamageClass::ALL` order.
     pub colours: [[u8; 3]; 3],
+    /// Colour damage by the survey it was first seen in instead of by class
+    /// (`display_by_survey`), when `survey_colours` are known.
+    pub by_survey: bool,
+    /// Per survey index, its damage colour (set by whoever knows the project's surveys; not
+    /// a setting).
+    #[serde(skip)]
+    pub survey_colours: Vec<[u8; 3]>,
+    /// The survey the model shown belongs to: its damage without a survey tag was first seen
+    /// there.
+    #[serde(skip)]
+    pub own_survey: u16,
+}
+
+/// Colour of damage first seen in an earlier survey than the one shown (the latest survey's
+/// takes the project's new-damage colour).
+pub const EARLIER_DAMAGE: [u8; 3] = [70, 130, 255];
+
+/// Survey colours for showing survey `shown` (0-based): every earlier survey's damage in
+/// `EARLIER_DAMAGE`, that survey's own in `new_colour`.
+pub fn survey_colours(shown: usize, new_colour: [u8; 3]) -> Vec<[u8; 3]> {
+    let mut colours = vec![EARLIER_DAMAGE; shown];
+    colours.push(new_colour);
+    colours
 }
 
 impl Default for DamageLayer {
@@ -36,6 +59,9 @@ impl Default for DamageLayer {
             damage_only: false,
             visible: [true; 3],
             colours: DamageClass::ALL.map(|c| c.default_colour()),
+            by_survey: false,
+            survey_colours: Vec::new(),
+            own_survey: 0,
         }
     }
 }
@@ -86,6 +112,7 @@ pub fn display_splats<'a>(
     let scale_changes =
         splat_scale.is_finite() && splat_scale > 0.0 && (splat_scale - 1.0).abs() > 1e-6;
     let damage = layer.enabled && splats.label_channels > 0;
+    let by_survey = damage && layer.by_survey && !layer.survey_colours.is_empty();
     let selected = splats.meta.state.iter().any(|&b| b & SELECTED != 0);
     let hidden = splats
         .meta
@@ -95,14 +122,18 @@ pub fn display_splats<'a>(
     if !scale_changes && !damage && !selected && !hidden {
         return Cow::Borrowed(splats);
     }
-    let mut out = splats.clone();
+    let mut out = if by_survey {
+        display_by_survey(splats, &layer.survey_colours, layer.own_survey)
+    } else {
+        splats.clone()
+    };
     if scale_changes {
         let ln = splat_scale.ln();
         for s in &mut out.log_scales {
             *s += glam::Vec3::splat(ln);
         }
     }
-    if damage {
+    if damage && !by_survey {
         let k_coeffs = out.sh_coeffs();
         let channels = out.label_channels;
         let opacity = layer.opacity.clamp(0.0, 1.0);
@@ -158,10 +189,11 @@ pub fn display_splats<'a>(
 }
 
 /// The model with its damage coloured by the survey it was first seen in (`survey_colours`
-/// indexed by `damage_survey`; the last colour for any later index) and the rest greyed: each
+/// indexed by `damage_survey`; the last colour for any later index; damage without a tag was
+/// first seen in `own_survey`, the survey the model belongs to) and the rest greyed: each
 /// Gaussian's colour goes to its survey's colour by its highest class probability. View-dependent
 /// colour is dropped.
-pub fn display_by_survey(splats: &Splats, survey_colours: &[[u8; 3]]) -> Splats {
+pub fn display_by_survey(splats: &Splats, survey_colours: &[[u8; 3]], own_survey: u16) -> Splats {
     use crate::splats::model::NO_SURVEY;
     let mut out = splats.clone();
     let k_coeffs = out.sh_coeffs();
@@ -170,8 +202,11 @@ pub fn display_by_survey(splats: &Splats, survey_colours: &[[u8; 3]]) -> Splats 
         let sh = &mut out.sh[g * k_coeffs * 3..(g + 1) * k_coeffs * 3];
         let grey = 0.25 * (SH_C0 * (sh[0] + sh[1] + sh[2]) / 3.0 + 0.5);
         let mut rgb = [grey; 3];
-        let survey = splats.meta.damage_survey[g];
-        if survey != NO_SURVEY && channels > 0 && !survey_colours.is_empty() {
+        let survey = match splats.meta.damage_survey[g] {
+            NO_SURVEY => own_survey,
+            tagged => tagged,
+        };
+        if channels > 0 && !survey_colours.is_empty() {
             let colour = survey_colours[usize::from(survey).min(survey_colours.len() - 1)];
             let w = splats.raw_labels[g * channels..(g + 1) * channels]
                 .iter()

@@ -129,6 +129,8 @@ pub struct ProjectSettings {
     /// Metres per model unit, once known (`twin set-scale`; a synthetic survey is metric).
     /// Structure from motion is up to scale: without it, quantities are in model units.
     pub metres_per_unit: Option<f64>,
+    /// The survey the viewer showed when the project was last saved from it (None: the latest).
+    pub shown_survey: Option<String>,
 }
 
 impl Default for ProjectSettings {
@@ -139,6 +141,7 @@ impl Default for ProjectSettings {
             new_damage_colour: NEW_DAMAGE_COLOUR,
             held_out_every: 8,
             metres_per_unit: None,
+            shown_survey: None,
         }
     }
 }

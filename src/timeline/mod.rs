@@ -8,6 +8,7 @@ pub mod align;
 pub mod appearance;
 pub mod changes;
 pub mod components;
+pub mod detect_survey;
 pub mod earlier;
 pub mod quantities;
 pub mod survey;

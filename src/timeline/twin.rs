@@ -316,6 +316,14 @@ fn io_error(path: &Path, e: std::io::Error) -> TimelineError {
 
 /// `path` made absolute against the current folder and cleaned of `.` and `..` (lexically, so
 /// that a folder that does not exist yet still has a place).
+/// Whether `a` and `b` name the same folder (compared as absolute, cleaned paths).
+pub fn same_folder(a: &Path, b: &Path) -> bool {
+    match (absolute(a), absolute(b)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => a == b,
+    }
+}
+
 fn absolute(path: &Path) -> std::io::Result<PathBuf> {
     let joined = std::path::absolute(path)?;
     let mut out = PathBuf::new();

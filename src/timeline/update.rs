@@ -30,6 +30,38 @@ pub struct UpdateConfig {
     pub appearance: bool,
 }
 
+impl UpdateConfig {
+    /// The update as the project sets it up: its class colours, background and held-out views,
+    /// with `strategy` at `scale` for `iterations` steps (the CLI's and the viewer's defaults).
+    pub fn for_project(
+        twin: &Twin,
+        strategy: crate::damage::refine::Strategy,
+        scale: crate::scene::ImageScale,
+        iterations: u32,
+        appearance: bool,
+    ) -> UpdateConfig {
+        let palette = crate::damage::Palette {
+            colours: crate::damage::DamageClass::ALL.map(|c| twin.project.colour(c)),
+        };
+        let every = twin.project.settings.held_out_every.max(1) as usize;
+        UpdateConfig {
+            refine: RefineConfig {
+                select: crate::damage::select::SelectConfig {
+                    palette,
+                    ..Default::default()
+                },
+                strategy,
+                scale,
+                iterations,
+                holdout: crate::train::views::Holdout::Auto { every },
+                background: glam::Vec3::from_array(twin.project.settings.background),
+                ..RefineConfig::default()
+            },
+            appearance,
+        }
+    }
+}
+
 /// What an update did and measured (the survey's `metrics.json`).
 #[derive(Clone, Debug, Serialize)]
 pub struct UpdateReport {
@@ -53,6 +85,24 @@ pub struct UpdateReport {
 pub struct UpdateOutcome {
     pub splats: Splats,
     pub report: UpdateReport,
+    /// Cancelled before the end: `splats` is the model as far as it got, and nothing should be
+    /// recorded.
+    pub cancelled: bool,
+}
+
+/// Writes an update's result into the project: the model and `metrics.json` of the updated
+/// survey (no other survey's files) and its light, then `twin.ron`. Returns the model's path.
+pub fn record_update(
+    twin: &mut Twin,
+    outcome: &UpdateOutcome,
+) -> Result<std::path::PathBuf, TimelineError> {
+    let name = &outcome.report.survey;
+    let index = twin.survey_index(name)?;
+    let path = twin.save_model(name, &outcome.splats)?;
+    twin.save_metrics(name, &outcome.report)?;
+    twin.project.surveys[index].appearance = outcome.report.appearance;
+    twin.save()?;
+    Ok(path)
 }
 
 /// Tags damage Gaussians with no survey yet as first seen in `survey` (label probability above
@@ -81,6 +131,23 @@ pub fn update_job(
 ) -> Job<UpdateOutcome> {
     Job::spawn("update", options, move |ctx| {
         update(ctx, &twin, &survey, &config)
+    })
+}
+
+/// The update of `survey` written into the project when it finishes (`record_update`); the
+/// project as saved comes back with the outcome. A cancelled or failed update writes nothing.
+pub fn update_project_job(
+    mut twin: Twin,
+    survey: String,
+    config: UpdateConfig,
+    options: JobOptions,
+) -> Job<(Twin, UpdateOutcome)> {
+    Job::spawn("update", options, move |ctx| {
+        let outcome = update(ctx, &twin, &survey, &config)?;
+        if !outcome.cancelled {
+            record_update(&mut twin, &outcome).map_err(timeline_error)?;
+        }
+        Ok((twin, outcome))
     })
 }
 
@@ -155,7 +222,11 @@ pub fn update(
         .iter()
         .filter(|&&s| s != NO_SURVEY && s < survey)
         .count();
-    let (look_before, look_after) = previous_look(twin, &previous, &model, &splats, &readout)?;
+    let (look_before, look_after) = if outcome.cancelled {
+        (None, None)
+    } else {
+        previous_look(twin, &previous, &model, &splats, &readout)?
+    };
     Ok(UpdateOutcome {
         splats,
         report: UpdateReport {
@@ -169,6 +240,7 @@ pub fn update(
             seconds: started.elapsed().as_secs_f64(),
             refine: outcome.report,
         },
+        cancelled: outcome.cancelled,
     })
 }
 

@@ -8,6 +8,7 @@ pub mod project;
 pub mod regions;
 pub mod selection;
 pub mod stats;
+pub mod timeline;
 pub mod training;
 pub mod view;
 
@@ -17,6 +18,7 @@ pub use project::ProjectPanel;
 pub use regions::RegionsPanel;
 pub use selection::SelectionPanel;
 pub use stats::StatsPanel;
+pub use timeline::TimelinePanel;
 pub use training::TrainingPanel;
 pub use view::ViewPanel;
 

@@ -4,11 +4,9 @@
 
 use std::path::PathBuf;
 
-use damage_twin::damage::refine::{RefineConfig, Strategy};
-use damage_twin::damage::select::SelectConfig;
-use damage_twin::damage::{DamageClass, Palette};
+use damage_twin::damage::refine::Strategy;
 use damage_twin::scene::ImageScale;
-use damage_twin::timeline::update::{UpdateConfig, update_job};
+use damage_twin::timeline::update::{UpdateConfig, update_project_job};
 use damage_twin::train::job::JobOptions;
 
 use crate::cli::args::{drive, parse_scale};
@@ -35,38 +33,25 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut twin = super::open(&args.dir)?;
-    let index = twin.survey_index(&args.survey)?;
-    let palette = Palette {
-        colours: DamageClass::ALL.map(|c| twin.project.colour(c)),
-    };
-    let every = twin.project.settings.held_out_every.max(1) as usize;
-    let config = UpdateConfig {
-        refine: RefineConfig {
-            select: SelectConfig {
-                palette,
-                ..SelectConfig::default()
-            },
-            strategy: args.strategy,
-            scale: args.scale,
-            iterations: args.iters,
-            holdout: damage_twin::train::views::Holdout::Auto { every },
-            background: glam::Vec3::from_array(twin.project.settings.background),
-            ..RefineConfig::default()
-        },
-        appearance: !args.no_appearance,
-    };
-    let job = update_job(
-        twin.clone(),
+    let twin = super::open(&args.dir)?;
+    twin.survey_index(&args.survey)?;
+    let config = UpdateConfig::for_project(
+        &twin,
+        args.strategy,
+        args.scale,
+        args.iters,
+        !args.no_appearance,
+    );
+    let job = update_project_job(
+        twin,
         args.survey.clone(),
         config,
         JobOptions::headless(args.threads),
     );
-    let outcome = drive(job, "update", args.quiet, |_| {})?;
-    let path = twin.save_model(&args.survey, &outcome.splats)?;
-    twin.save_metrics(&args.survey, &outcome.report)?;
-    twin.project.surveys[index].appearance = outcome.report.appearance;
-    twin.save()?;
+    let (twin, outcome) = drive(job, "update", args.quiet, |_| {})?;
+    let path = twin
+        .model_path(&args.survey)?
+        .unwrap_or_else(|| twin.survey_dir(&args.survey));
     let r = &outcome.report;
     println!(
         "updated {} from {} in {:.0} s: {} new-damage Gaussians; held-out IoU {:?} → {:?}; model {}",
