@@ -19,6 +19,21 @@ pub enum DialogKind {
     ExportPng,
 }
 
+/// What a click selects.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PointSelect {
+    /// The Gaussian drawing most of the clicked pixel.
+    Gaussian,
+    /// Every visible Gaussian whose base colour is within the settings' colour match of the
+    /// clicked Gaussian's (eyedropper).
+    Colour,
+    /// The Gaussians whose centres lie in a sphere (radius from the settings) around the
+    /// surface point clicked.
+    Sphere,
+    /// The same with an axis-aligned cube (half-size from the settings).
+    Box,
+}
+
 /// A state change.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Command {
@@ -59,6 +74,28 @@ pub enum Command {
         camera: Box<crate::scene::Camera>,
         op: crate::splats::selection::SetOp,
     },
+    /// Combine what a click at `pixel` (pixels of `camera`) selects with the selection.
+    SelectAt {
+        pixel: glam::Vec2,
+        camera: Box<crate::scene::Camera>,
+        how: PointSelect,
+        op: crate::splats::selection::SetOp,
+    },
+    /// Combine the Gaussians the snapped view's mask of `class` lifts to (blending-weight
+    /// majority) with the selection.
+    SelectFromMask {
+        class: crate::damage::DamageClass,
+        op: crate::splats::selection::SetOp,
+    },
+    /// Add the surface point at `pixel` to the distance measurement (a third point starts a
+    /// new one).
+    MeasureAt {
+        pixel: glam::Vec2,
+        camera: Box<crate::scene::Camera>,
+    },
+    ClearDistance,
+    /// Frame the selection (the whole scene when nothing is selected).
+    FrameSelection,
     SelectAll,
     SelectNone,
     InvertSelection,

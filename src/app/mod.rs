@@ -200,7 +200,7 @@ impl TwinApp {
             self.commands.push(Command::SaveProjectHere);
         }
         if frame && !ctx.egui_wants_keyboard_input() {
-            self.commands.push(Command::ResetView);
+            self.commands.push(Command::FrameSelection);
         }
         let dropped: Vec<PathBuf> = ctx.input(|i| {
             i.raw

@@ -85,6 +85,13 @@ pub struct Settings {
     pub damage: DamageLayer,
     /// Show the charts panel.
     pub show_charts: bool,
+    /// Screen selections take only the Gaussians that draw inside the shape (by rendered
+    /// contribution); off: every Gaussian whose centre projects inside, straight through.
+    pub selection_front_most: bool,
+    /// Eyedropper: largest RGB distance (0–1 per channel) of a matching base colour.
+    pub colour_match: f32,
+    /// Sphere radius / box half-size of the volume tools, in model units.
+    pub volume_radius: f32,
     /// Most recently opened datasets / projects, newest first.
     pub recent: Vec<std::path::PathBuf>,
     /// Format of the stored settings; files written before versions existed read as 0.
@@ -121,6 +128,9 @@ impl Default for Settings {
             training: TrainingSettings::default(),
             damage: DamageLayer::default(),
             show_charts: true,
+            selection_front_most: false,
+            colour_match: 0.12,
+            volume_radius: 0.5,
             recent: Vec::new(),
             version: SETTINGS_VERSION,
         }
@@ -164,6 +174,10 @@ impl Settings {
             10.0,
             d.training.label_weight,
         );
+        self.colour_match = clamp(self.colour_match, 0.0, 1.8, d.colour_match);
+        self.volume_radius = clamp(self.volume_radius, 1e-3, 1e4, d.volume_radius);
+        self.colour_match = clamp(self.colour_match, 0.0, 1.8, d.colour_match);
+        self.volume_radius = clamp(self.volume_radius, 1e-3, 1e4, d.volume_radius);
         self.recent.truncate(Self::MAX_RECENT);
         self
     }

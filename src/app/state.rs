@@ -23,6 +23,7 @@ use crate::timeline::Twin;
 use crate::train::history::History;
 
 mod editing;
+mod picking;
 mod refining;
 mod saving;
 mod timeline;
@@ -126,6 +127,8 @@ pub struct AppState {
     pub refine: Option<RefineSession>,
     /// The open project's surveys (a twin project, not a bare dataset or model).
     pub timeline: Option<TimelineView>,
+    /// Surface points of the distance measurement (zero, one or two).
+    pub distance: Vec<glam::Vec3>,
     pub log: VecDeque<String>,
     /// Viewport size in pixels, as last laid out (for PNG export at screen size).
     pub viewport_pixels: [u32; 2],
@@ -157,6 +160,7 @@ impl AppState {
             edits: EditHistory::default(),
             refine: None,
             timeline: None,
+            distance: Vec::new(),
             log: VecDeque::new(),
             viewport_pixels: [960, 540],
             frame_stats: FrameStats::default(),
@@ -440,12 +444,17 @@ impl AppState {
                 None => self.log_line("nothing to measure yet: no model"),
             },
             Command::FocusRegion(index) => self.focus_region(index),
-            Command::Select { shape, camera, op } => {
-                self.edit_model(|m| {
-                    let hit = selection::hits(m, &camera, &shape);
-                    selection::select(m, &hit, op)
-                });
-            }
+            Command::Select { shape, camera, op } => self.select_shape(&shape, &camera, op),
+            Command::SelectAt {
+                pixel,
+                camera,
+                how,
+                op,
+            } => self.select_at(pixel, &camera, how, op),
+            Command::SelectFromMask { class, op } => self.select_from_mask(class, op),
+            Command::MeasureAt { pixel, camera } => self.measure_at(pixel, &camera),
+            Command::ClearDistance => self.distance.clear(),
+            Command::FrameSelection => self.frame_selection(),
             Command::SelectDamage {
                 class,
                 threshold,

@@ -1,12 +1,14 @@
 //! Selection tools in the viewport, with SuperSplat's keys: R rectangle, L lasso, P polygon
 //! (click points; Backspace drops one, Enter closes), B brush (`[` and `]` resize it, drawn as a
-//! circle), Esc leaves the tool. While a tool is active the primary button draws instead of
-//! orbiting; the shape becomes a `Command::Select` with the set operation of the modifiers held
-//! (none set, Shift add, Ctrl remove, Shift+Ctrl intersect).
+//! circle), and click tools: C the Gaussian under the pointer, I the eyedropper (its colour),
+//! O a sphere and X a box around the surface point clicked, M the distance between two clicked
+//! surface points. Esc leaves the tool. While a tool is active the primary button draws instead
+//! of orbiting; the shape becomes a `Command::Select` (or `SelectAt`) with the set operation of
+//! the modifiers held (none set, Shift add, Ctrl remove, Shift+Ctrl intersect).
 
 use glam::Vec2;
 
-use crate::app::commands::Command;
+use crate::app::commands::{Command, PointSelect};
 use crate::scene::Camera;
 use crate::splats::selection::{SetOp, Shape};
 
@@ -16,6 +18,10 @@ pub enum Tool {
     Lasso,
     Polygon,
     Brush,
+    /// A click tool: what a click selects.
+    Click(PointSelect),
+    /// Distance between two clicked surface points.
+    Measure,
 }
 
 impl Tool {
@@ -25,6 +31,11 @@ impl Tool {
             Tool::Lasso => "lasso",
             Tool::Polygon => "polygon",
             Tool::Brush => "brush",
+            Tool::Click(PointSelect::Gaussian) => "click",
+            Tool::Click(PointSelect::Colour) => "eyedropper",
+            Tool::Click(PointSelect::Sphere) => "sphere",
+            Tool::Click(PointSelect::Box) => "box",
+            Tool::Measure => "measure",
         }
     }
 }
@@ -64,6 +75,11 @@ impl ToolState {
             (egui::Key::L, Tool::Lasso),
             (egui::Key::P, Tool::Polygon),
             (egui::Key::B, Tool::Brush),
+            (egui::Key::C, Tool::Click(PointSelect::Gaussian)),
+            (egui::Key::I, Tool::Click(PointSelect::Colour)),
+            (egui::Key::O, Tool::Click(PointSelect::Sphere)),
+            (egui::Key::X, Tool::Click(PointSelect::Box)),
+            (egui::Key::M, Tool::Measure),
         ] {
             if pressed(key) {
                 self.tool = Some(tool);
@@ -124,6 +140,28 @@ impl ToolState {
                     && let Some(p) = response.interact_pointer_pos()
                 {
                     self.points.push(at(p));
+                }
+            }
+            Tool::Click(how) => {
+                if response.clicked_by(primary)
+                    && let Some(p) = response.interact_pointer_pos()
+                {
+                    commands.push(Command::SelectAt {
+                        pixel: at(p),
+                        camera: Box::new(*camera),
+                        how,
+                        op,
+                    });
+                }
+            }
+            Tool::Measure => {
+                if response.clicked_by(primary)
+                    && let Some(p) = response.interact_pointer_pos()
+                {
+                    commands.push(Command::MeasureAt {
+                        pixel: at(p),
+                        camera: Box::new(*camera),
+                    });
                 }
             }
             Tool::Rect | Tool::Lasso | Tool::Brush => {
@@ -198,6 +236,14 @@ impl ToolState {
                 }
                 if let Some(h) = hover {
                     painter.circle_stroke(h, self.brush_radius, stroke);
+                }
+            }
+            Tool::Click(_) | Tool::Measure => {
+                if let Some(h) = hover {
+                    painter
+                        .line_segment([h - egui::vec2(6.0, 0.0), h + egui::vec2(6.0, 0.0)], stroke);
+                    painter
+                        .line_segment([h - egui::vec2(0.0, 6.0), h + egui::vec2(0.0, 6.0)], stroke);
                 }
             }
         }

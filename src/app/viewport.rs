@@ -461,6 +461,29 @@ impl Viewport {
                 stroke,
             );
         }
+        // The distance measurement: its points, the line between them and the distance.
+        let colour = egui::Color32::from_rgb(255, 230, 0);
+        let on_screen: Vec<egui::Pos2> = state
+            .distance
+            .iter()
+            .filter_map(|&p| camera.project(p))
+            .map(|p| rect.min + egui::vec2(p.x, p.y))
+            .collect();
+        for &p in &on_screen {
+            painter.circle_filled(p, 4.0, colour);
+        }
+        if let [a, b] = on_screen.as_slice() {
+            painter.line_segment([*a, *b], egui::Stroke::new(2.0, colour));
+            if let Some(text) = state.distance_text() {
+                painter.text(
+                    *b + egui::vec2(8.0, -8.0),
+                    egui::Align2::LEFT_BOTTOM,
+                    text,
+                    egui::FontId::proportional(14.0),
+                    colour,
+                );
+            }
+        }
     }
 
     fn draw_photo(

@@ -15,6 +15,7 @@ pub mod measure;
 pub mod mode;
 pub mod overlay;
 pub mod palette;
+pub mod pick;
 pub mod reference;
 pub mod refine;
 mod refine_selection;

@@ -76,7 +76,25 @@ impl Shape {
         )
     }
 
-    fn contains_pixel(&self, p: Vec2) -> bool {
+    /// The screen box `(min, max)` a screen shape lies in (None for volumes and empty shapes).
+    pub fn screen_bounds(&self) -> Option<(Vec2, Vec2)> {
+        let bounds = |points: &[Vec2], pad: f32| {
+            let first = *points.first()?;
+            let (lo, hi) = points
+                .iter()
+                .fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+            Some((lo - Vec2::splat(pad), hi + Vec2::splat(pad)))
+        };
+        match self {
+            Shape::Rect { a, b } => Some((a.min(*b), a.max(*b))),
+            Shape::Polygon(points) => bounds(points, 0.0),
+            Shape::Brush { centres, radius } => bounds(centres, *radius),
+            Shape::Sphere { .. } | Shape::Box { .. } => None,
+        }
+    }
+
+    /// Whether screen point `p` (pixels) lies in the shape; volumes contain no pixel.
+    pub fn contains_pixel(&self, p: Vec2) -> bool {
         match self {
             Shape::Rect { a, b } => {
                 let (lo, hi) = (a.min(*b), a.max(*b));

@@ -3,6 +3,7 @@
 //! selection, hide and undo. The drawing tools are keys in the viewport (listed here).
 
 use crate::app::commands::Command;
+use crate::app::panels::edit_settings;
 use crate::app::state::AppState;
 use crate::damage::DamageClass;
 use crate::damage::refine::Strategy;
@@ -42,8 +43,43 @@ impl SelectionPanel {
             splats.len()
         ));
         ui.weak(
-            "R rectangle · L lasso · P polygon · B brush · Esc leaves; Shift adds, Ctrl removes",
+            "R rectangle · L lasso · P polygon · B brush · C click · I eyedropper · O sphere · \
+             X box · M measure · F frames the selection · Esc leaves; Shift adds, Ctrl removes",
         );
+        let settings = &state.settings;
+        let mut front = settings.selection_front_most;
+        let mut colour = settings.colour_match;
+        let mut radius = settings.volume_radius;
+        ui.checkbox(&mut front, "front-most only").on_hover_text(
+            "Shapes take only the Gaussians that draw inside them (not those hidden behind)",
+        );
+        ui.add(egui::Slider::new(&mut colour, 0.01..=0.5).text("colour match"));
+        ui.add(
+            egui::Slider::new(&mut radius, 0.01..=20.0)
+                .logarithmic(true)
+                .text("volume radius"),
+        );
+        if (front, colour, radius)
+            != (
+                settings.selection_front_most,
+                settings.colour_match,
+                settings.volume_radius,
+            )
+        {
+            edit_settings(state, commands, |s| {
+                s.selection_front_most = front;
+                s.colour_match = colour;
+                s.volume_radius = radius;
+            });
+        }
+        if let Some(text) = state.distance_text() {
+            ui.horizontal(|ui| {
+                ui.label(format!("Distance: {text}"));
+                if ui.small_button("Clear").clicked() {
+                    commands.push(Command::ClearDistance);
+                }
+            });
+        }
         ui.horizontal(|ui| {
             egui::ComboBox::from_id_salt("selection-class")
                 .selected_text(self.class.id())
@@ -87,6 +123,18 @@ impl SelectionPanel {
                         op,
                     });
                 }
+            }
+            if ui
+                .add_enabled(state.snap.is_some(), egui::Button::new("From mask"))
+                .on_hover_text(
+                    "The snapped view's mask of this class, lifted to the Gaussians that draw it",
+                )
+                .clicked()
+            {
+                commands.push(Command::SelectFromMask {
+                    class: self.class,
+                    op: SetOp::Set,
+                });
             }
         });
         ui.horizontal(|ui| {
