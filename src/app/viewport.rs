@@ -325,7 +325,9 @@ impl Viewport {
             painter.text(
                 full.center(),
                 egui::Align2::CENTER_CENTER,
-                if state.scene.is_some() {
+                if state.timeline.is_some() {
+                    "this survey has no model yet: Update twin makes it from the one before"
+                } else if state.scene.is_some() {
                     "waiting for the first model…"
                 } else {
                     "Open a dataset or drop a folder here"

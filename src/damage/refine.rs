@@ -87,6 +87,10 @@ pub struct RefineConfig {
     pub appearance: BTreeMap<usize, ColourTransform>,
     /// Refine these Gaussians (a person's selection) instead of selecting damage by the masks.
     pub given: Option<Vec<u32>>,
+    /// Learning rates other than the from-scratch ones (the label rate is `label_lr`).
+    pub lr: crate::train::spec::LrOverrides,
+    /// Each refined Gaussian's scale stays within this factor of its size before (None: free).
+    pub max_scale_growth: Option<f32>,
 }
 
 impl Default for RefineConfig {
@@ -113,6 +117,8 @@ impl Default for RefineConfig {
             label_lr: run.label_lr,
             appearance: BTreeMap::new(),
             given: None,
+            lr: crate::train::spec::LrOverrides::default(),
+            max_scale_growth: None,
         }
     }
 }
@@ -468,7 +474,9 @@ fn refine_spec(config: &RefineConfig, model: &Splats, labels: bool) -> TrainSpec
         0.0
     };
     spec.targets.label_pos_weight = config.label_pos_weight;
-    spec.lr.raw_labels = config.label_lr;
+    spec.lr = config.lr;
+    spec.lr.raw_labels = config.label_lr.or(config.lr.raw_labels);
+    spec.max_scale_growth = config.max_scale_growth;
     spec.densify = match config.strategy {
         Strategy::Finetune => DensifyPolicy::Off,
         // No opacity reset: in a short local run it would blank the damage mid-way, and the

@@ -30,6 +30,25 @@ pub struct UpdateConfig {
     pub appearance: bool,
 }
 
+/// How far the update may grow a Gaussian. With no bound, 175 of the demo's 8,441 trained
+/// Gaussians grew more than 5× into opaque streaks that cost survey 1's views 2.2 dB; bounded at
+/// 2×, the earlier views keep 1.6 dB of that with the same crack IoU and length
+/// (docs/TIMELINE.md, "Update, measured").
+pub const UPDATE_MAX_SCALE_GROWTH: f32 = 2.0;
+
+/// Gentler rates for the update (`twin update --gentle-rates`): position 1.6e-5 × extent,
+/// log-scale 1e-3, opacity 0.01, a continuation rather than a restart. They keep the earlier
+/// views 0.7 dB better still but learn 7.7 m less of the new cracks on the demo, so they are not
+/// the default.
+pub fn gentle_learning_rates() -> crate::train::spec::LrOverrides {
+    crate::train::spec::LrOverrides {
+        means: Some(1.6e-5),
+        log_scales: Some(1e-3),
+        raw_opacities: Some(0.01),
+        ..Default::default()
+    }
+}
+
 impl UpdateConfig {
     /// The update as the project sets it up: its class colours, background and held-out views,
     /// with `strategy` at `scale` for `iterations` steps (the CLI's and the viewer's defaults).
@@ -55,6 +74,7 @@ impl UpdateConfig {
                 iterations,
                 holdout: crate::train::views::Holdout::Auto { every },
                 background: glam::Vec3::from_array(twin.project.settings.background),
+                max_scale_growth: Some(UPDATE_MAX_SCALE_GROWTH),
                 ..RefineConfig::default()
             },
             appearance,

@@ -11,6 +11,7 @@ pub mod job;
 pub mod loss;
 pub mod priority;
 pub mod run;
+pub mod scale_cap;
 pub mod schedule;
 pub mod spec;
 pub mod ssim;

@@ -183,6 +183,9 @@ pub struct TrainSpec {
     pub seed: u64,
     /// Steps between held-out evaluations (0: only at the end).
     pub eval_every: u32,
+    /// Each trainable Gaussian's scale stays within this factor of its size at the start
+    /// (`scale_cap`; None: unbounded, as in a from-scratch run).
+    pub max_scale_growth: Option<f32>,
 }
 
 impl TrainSpec {
@@ -201,6 +204,7 @@ impl TrainSpec {
             background: Vec3::ZERO,
             seed: 0,
             eval_every: 0,
+            max_scale_growth: None,
         }
     }
 

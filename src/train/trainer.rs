@@ -18,6 +18,7 @@ use crate::train::densify::{Densifier, camera_extent};
 use crate::train::evaluate::{EvalScores, evaluate_with};
 use crate::train::guards::first_non_finite_param;
 use crate::train::loss::{LabelLossParams, LossWorkspace, label_loss, photometric_loss};
+use crate::train::scale_cap::ScaleCap;
 use crate::train::schedule::sh_degree_for_step;
 use crate::train::spec::{TrainSpec, TrainView};
 
@@ -127,6 +128,7 @@ pub struct Trainer {
     grads: SplatGrads,
     adam: Adam,
     densifier: Option<Densifier>,
+    scale_cap: Option<ScaleCap>,
     lrs: LearningRates,
     groups: GroupFlags,
     extent: f32,
@@ -223,6 +225,9 @@ impl Trainer {
             .densify_config()
             .map(|config| Densifier::new(config, splats.len()));
         let adam = Adam::new(&splats);
+        let scale_cap = spec
+            .max_scale_growth
+            .map(|growth| ScaleCap::new(&splats, |g| !splats.meta.frozen[g], growth));
         let regions = views
             .iter()
             .map(|v| {
@@ -253,6 +258,7 @@ impl Trainer {
             grads,
             adam,
             densifier,
+            scale_cap,
             lrs,
             groups,
             extent,
@@ -466,6 +472,9 @@ impl Trainer {
             &self.groups,
             Some(&self.grads.visible),
         );
+        if let Some(cap) = &self.scale_cap {
+            cap.apply(&mut self.splats);
+        }
         self.timings.optimizer += t.elapsed().as_secs_f64();
         if let Some(what) = non_finite {
             return self.roll_back(step, started, what.to_string());

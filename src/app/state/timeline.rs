@@ -225,7 +225,9 @@ impl AppState {
         match shown.splats {
             Some(s) => self.set_splats(s),
             None => {
-                self.set_splats(Arc::new(Splats::empty(0, 0)));
+                self.edits.clear();
+                self.splats = None;
+                self.splats_generation += 1;
                 self.log_line(format!("survey {name} has no model yet: update the twin"));
             }
         }

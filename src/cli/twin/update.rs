@@ -26,6 +26,13 @@ pub struct Args {
     /// Train on the photos as they are (no per-photo light compensation).
     #[arg(long)]
     pub no_appearance: bool,
+    /// Each trained Gaussian's scale stays within this factor of its size before (0: unbounded).
+    #[arg(long, default_value_t = damage_twin::timeline::update::UPDATE_MAX_SCALE_GROWTH)]
+    pub max_scale_growth: f32,
+    /// Train with gentler learning rates than a from-scratch run (the earlier survey's views keep
+    /// their look better; new thin damage is learnt less: docs/TIMELINE.md).
+    #[arg(long)]
+    pub gentle_rates: bool,
     #[arg(long)]
     pub threads: Option<usize>,
     #[arg(long)]
@@ -35,13 +42,17 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let twin = super::open(&args.dir)?;
     twin.survey_index(&args.survey)?;
-    let config = UpdateConfig::for_project(
+    let mut config = UpdateConfig::for_project(
         &twin,
         args.strategy,
         args.scale,
         args.iters,
         !args.no_appearance,
     );
+    config.refine.max_scale_growth = (args.max_scale_growth > 0.0).then_some(args.max_scale_growth);
+    if args.gentle_rates {
+        config.refine.lr = damage_twin::timeline::update::gentle_learning_rates();
+    }
     let job = update_project_job(
         twin,
         args.survey.clone(),
