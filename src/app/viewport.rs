@@ -321,7 +321,7 @@ impl Viewport {
                     self.draw_picture(&painter, 1, rect, clip, &camera, &other, state, use_cpu);
                 self.draw_survey_labels(ui, &painter, full, render_rect, *index, state);
             }
-        } else {
+        } else if state.snap.is_none() {
             painter.text(
                 full.center(),
                 egui::Align2::CENTER_CENTER,
