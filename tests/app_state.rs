@@ -66,6 +66,7 @@ fn dataset_with_views(root: &std::path::Path, n: usize) -> Dataset {
                 ),
                 distortion: None,
                 split: Split::Unspecified,
+                ignore_mask: None,
             }
         })
         .collect();

@@ -214,6 +214,7 @@ fn dataset(root: &Path, image: &Path, camera_size: (u32, u32)) -> Dataset {
             camera: Camera::new(intrinsics, Quat::IDENTITY, Vec3::ZERO),
             distortion: None,
             split: Split::Unspecified,
+            ignore_mask: None,
         }],
         image_files: 1,
         camera_count: 1,

@@ -116,3 +116,121 @@ fn ignore_masks_keep_a_painted_block_out_of_training() {
     );
     assert!(with >= clean - 1.0, "masked {with:.2} vs clean {clean:.2}");
 }
+
+/// A two-frame nerfstudio dataset whose first frame names an ignore mask (`mask_path`), kept as
+/// nerfstudio does in `masks/<stem>.png`; `missing` names a mask file that is not there.
+fn nerfstudio_with_mask_path(dir: &Path, missing: bool) {
+    std::fs::create_dir_all(dir.join("images")).unwrap();
+    std::fs::create_dir_all(dir.join("masks")).unwrap();
+    for name in ["f0", "f1"] {
+        image::RgbImage::from_pixel(16, 12, image::Rgb([120, 90, 60]))
+            .save(dir.join("images").join(format!("{name}.png")))
+            .unwrap();
+    }
+    // Left half ignored (0), right half used (255).
+    image::GrayImage::from_fn(16, 12, |x, _| image::Luma([if x < 8 { 0 } else { 255 }]))
+        .save(dir.join("masks/f0.png"))
+        .unwrap();
+    let mask = if missing {
+        "masks/none.png"
+    } else {
+        "masks/f0.png"
+    };
+    let m = |x: f32| format!("[[1,0,0,{x}],[0,1,0,0],[0,0,1,4],[0,0,0,1]]");
+    let json = format!(
+        r#"{{"fl_x":20,"fl_y":20,"cx":8,"cy":6,"w":16,"h":12,"frames":[
+            {{"file_path":"images/f0.png","mask_path":"{mask}","transform_matrix":{}}},
+            {{"file_path":"images/f1.png","transform_matrix":{}}}]}}"#,
+        m(0.0),
+        m(0.5)
+    );
+    std::fs::write(dir.join("transforms.json"), json).unwrap();
+}
+
+#[test]
+fn nerfstudio_mask_path_is_the_frames_ignore_mask_not_a_damage_mask() {
+    let dir = tempfile::tempdir().unwrap();
+    nerfstudio_with_mask_path(dir.path(), false);
+    let dataset = Dataset::open(dir.path(), &OpenOptions::default()).expect("opens");
+    assert_eq!(dataset.ignore_mask_count(), 1);
+    let f0 = dataset.view_index("f0").unwrap();
+    let loaded = dataset.load_view(f0, ImageScale::Factor(1)).expect("loads");
+    let ignore = loaded.ignore.expect("frame 0 has its mask_path");
+    assert_eq!(ignore.data[0], 0, "left half ignored");
+    assert_eq!(ignore.data[15], 1, "right half used");
+    assert!(
+        loaded.masks.is_empty(),
+        "the ignore mask is not read as damage"
+    );
+    let f1 = dataset.view_index("f1").unwrap();
+    assert!(
+        dataset
+            .load_view(f1, ImageScale::Factor(1))
+            .unwrap()
+            .ignore
+            .is_none()
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    nerfstudio_with_mask_path(dir.path(), true);
+    let error = Dataset::open(dir.path(), &OpenOptions::default())
+        .expect_err("a named mask that is missing is refused")
+        .to_string();
+    assert!(
+        error.contains("transforms.json") && error.contains("mask_path"),
+        "{error}"
+    );
+}
+
+/// The viewer shows a photo's ignore mask when snapping to its view (ignored pixels dimmed
+/// towards magenta), and the photo as it is with the setting off.
+#[cfg(feature = "app")]
+#[test]
+fn the_viewer_dims_the_ignored_part_of_a_snapped_photo() {
+    use damage_twin::app::commands::Command;
+    use damage_twin::app::settings::Settings;
+    use damage_twin::app::state::{AppState, Photo};
+    let dir = tempfile::tempdir().unwrap();
+    nerfstudio_with_mask_path(dir.path(), false);
+    for show in [true, false] {
+        let mut state = AppState::new(Settings {
+            show_ignore_masks: show,
+            ..Settings::default()
+        });
+        state.apply(Command::Open(dir.path().to_path_buf()));
+        let start = std::time::Instant::now();
+        while state.scene.is_none() {
+            state.poll();
+            assert!(start.elapsed().as_secs() < 10, "{:?}", state.log);
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        let f0 = state
+            .scene
+            .as_ref()
+            .unwrap()
+            .dataset
+            .as_ref()
+            .unwrap()
+            .view_index("f0");
+        state.apply(Command::SnapToView(f0.unwrap()));
+        let photo = loop {
+            state.poll();
+            if let Some(Photo::Loaded(image)) = state.snap.as_ref().map(|s| s.photo.clone()) {
+                break image;
+            }
+            assert!(start.elapsed().as_secs() < 10, "{:?}", state.log);
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        };
+        let (left, right) = (&photo.data[0..3], &photo.data[15 * 3..16 * 3]);
+        assert!(
+            (right[0] - 120.0 / 255.0).abs() < 0.01,
+            "used pixels as they are"
+        );
+        if show {
+            assert!(left[1] < right[1] * 0.5, "ignored pixels dimmed: {left:?}");
+            assert!(left[2] > left[1], "and tinted magenta: {left:?}");
+        } else {
+            assert_eq!(left, right, "the photo as it is");
+        }
+    }
+}

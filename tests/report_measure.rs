@@ -297,6 +297,7 @@ fn the_viewer_selects_and_frames_a_measured_region() {
             camera: camera_at(eye),
             distortion: None,
             split: Split::Unspecified,
+            ignore_mask: None,
         })
         .collect();
     let dataset = Dataset {

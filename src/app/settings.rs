@@ -79,6 +79,8 @@ pub struct Settings {
     pub compare_mode: CompareMode,
     /// How two surveys are compared.
     pub survey_layout: SurveyLayout,
+    /// Photos compared with the render show their ignore mask (ignored pixels dimmed, magenta).
+    pub show_ignore_masks: bool,
     /// Photo opacity in blend mode.
     pub compare_blend: f32,
     pub training: TrainingSettings,
@@ -124,6 +126,7 @@ impl Default for Settings {
             viewport_renderer: ViewportRenderer::Auto,
             compare_mode: CompareMode::Swipe,
             survey_layout: SurveyLayout::SideBySide,
+            show_ignore_masks: true,
             compare_blend: 0.5,
             training: TrainingSettings::default(),
             damage: DamageLayer::default(),

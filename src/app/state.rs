@@ -549,7 +549,12 @@ impl AppState {
         });
         match change_map {
             Some(path) => workers::load_picture(path, index, self.results_sender()),
-            None => workers::load_photo(dataset, index, self.results_sender()),
+            None => workers::load_photo(
+                dataset,
+                index,
+                self.settings.show_ignore_masks,
+                self.results_sender(),
+            ),
         }
     }
 

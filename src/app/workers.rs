@@ -139,8 +139,14 @@ pub fn dialog(kind: DialogKind, start: Option<PathBuf>, results: Sender<WorkerRe
     });
 }
 
-/// Loads view `index`'s photo (at most `PHOTO_MAX_WIDTH` wide) for the comparison.
-pub fn load_photo(dataset: Arc<Dataset>, index: usize, results: Sender<WorkerResult>) {
+/// Loads view `index`'s photo (at most `PHOTO_MAX_WIDTH` wide) for the comparison; with
+/// `show_ignore`, the pixels its ignore mask keeps out of training are dimmed towards magenta.
+pub fn load_photo(
+    dataset: Arc<Dataset>,
+    index: usize,
+    show_ignore: bool,
+    results: Sender<WorkerResult>,
+) {
     spawn("damage-twin-photo", move || {
         let width = dataset
             .views
@@ -157,13 +163,31 @@ pub fn load_photo(dataset: Arc<Dataset>, index: usize, results: Sender<WorkerRes
         let result = dataset
             .load_view(index, scale)
             .or_else(|_| dataset.load_view(index, ImageScale::Factor(1)))
-            .map(|v| Arc::new(v.image))
+            .map(|v| {
+                let mut image = v.image;
+                if let (true, Some(ignore)) = (show_ignore, &v.ignore) {
+                    mark_ignored(&mut image, ignore);
+                }
+                Arc::new(image)
+            })
             .map_err(|e| e.to_string());
         let _ = results.send(WorkerResult::Photo {
             view: index,
             result,
         });
     });
+}
+
+/// Dims the pixels `ignore` keeps out (0) towards magenta, so they read as "not learnt from".
+pub fn mark_ignored(image: &mut crate::scene::RgbImage, ignore: &crate::scene::Mask) {
+    const MAGENTA: [f32; 3] = [1.0, 0.0, 1.0];
+    for (rgb, &use_pixel) in image.data.chunks_exact_mut(3).zip(&ignore.data) {
+        if use_pixel == 0 {
+            for (v, m) in rgb.iter_mut().zip(MAGENTA) {
+                *v = 0.35 * *v + 0.3 * m;
+            }
+        }
+    }
 }
 
 /// Loads a picture file (a change map) as view `index`'s comparison picture.

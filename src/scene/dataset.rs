@@ -58,6 +58,9 @@ pub struct View {
     /// Set when the stored image is distorted and must be remapped to `camera` on load.
     pub distortion: Option<Distortion>,
     pub split: Split,
+    /// The image's ignore mask named by the dataset itself (nerfstudio's per-frame `mask_path`),
+    /// used instead of COLMAP's `masks/<image file name>.png`.
+    pub ignore_mask: Option<PathBuf>,
 }
 
 /// An opened dataset: metadata only.
@@ -98,15 +101,25 @@ pub struct LoadedView {
 }
 
 impl Dataset {
-    /// Views with an ignore mask (`masks/<image file name>.png`, COLMAP's convention).
+    /// Views with an ignore mask (nerfstudio's `mask_path`, or COLMAP's
+    /// `masks/<image file name>.png`).
     pub fn ignore_mask_count(&self) -> usize {
-        let Some(dir) = &self.masks_dir else { return 0 };
         self.views
             .iter()
-            .filter(|v| {
-                crate::scene::masks::ignore_mask_path(dir, &v.name, &v.image_path).is_some()
-            })
+            .filter(|v| self.ignore_mask_file(v).is_some())
             .count()
+    }
+
+    /// Where view `view`'s ignore mask is: the file the dataset names for it, else COLMAP's
+    /// `masks/<image file name>.png` when it exists.
+    pub fn ignore_mask_file(&self, view: &View) -> Option<PathBuf> {
+        match &view.ignore_mask {
+            Some(path) => Some(path.clone()),
+            None => {
+                let dir = self.masks_dir.as_ref()?;
+                crate::scene::masks::ignore_mask_path(dir, &view.name, &view.image_path)
+            }
+        }
     }
 
     /// The index of the view named `name`: its full name (`images/0049.jpg`'s stem path) or the

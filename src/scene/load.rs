@@ -238,9 +238,13 @@ impl Dataset {
             )?,
             None => Default::default(),
         };
-        let ignore = match &self.masks_dir {
-            Some(dir) => read_ignore_mask(dir, &view.name, &view.image_path, stored)?
-                .map(|m| prepared_mask(m, &camera, distortion.as_ref(), (width, height))),
+        let ignore = match self.ignore_mask_file(view) {
+            Some(path) => Some(prepared_mask(
+                read_ignore_mask(&path, &view.image_path, stored)?,
+                &camera,
+                distortion.as_ref(),
+                (width, height),
+            )),
             None => None,
         };
         Ok(LoadedView {
@@ -349,7 +353,13 @@ fn read_masks_at(
     distortion: Option<&Distortion>,
     size: (u32, u32),
 ) -> Result<BTreeMap<DamageClass, Mask>, SceneError> {
-    let masks = read_view_masks(dir, &view.name, &view.image_path, stored)?;
+    let masks = read_view_masks(
+        dir,
+        &view.name,
+        &view.image_path,
+        stored,
+        view.ignore_mask.as_deref(),
+    )?;
     Ok(masks
         .into_iter()
         .map(|(class, mask)| (class, prepared_mask(mask, camera, distortion, size)))

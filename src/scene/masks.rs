@@ -196,21 +196,17 @@ pub fn ignore_mask_path(masks_dir: &Path, stem: &str, image_path: &Path) -> Opti
     path.is_file().then_some(path)
 }
 
-/// An image's ignore mask (1 = use the pixel, 0 = ignore it: a pedestrian, a car, the sky), when
-/// it has one; refused when its size is not the image's.
+/// An image's ignore mask at `path` (1 = use the pixel, 0 = ignore it: a pedestrian, a car, the
+/// sky); refused when its size is not the image's.
 pub fn read_ignore_mask(
-    masks_dir: &Path,
-    stem: &str,
+    path: &Path,
     image_path: &Path,
     image_size: (u32, u32),
-) -> Result<Option<Mask>, SceneError> {
-    let Some(path) = ignore_mask_path(masks_dir, stem, image_path) else {
-        return Ok(None);
-    };
-    let mask = read_binary_mask(&path)?;
+) -> Result<Mask, SceneError> {
+    let mask = read_binary_mask(path)?;
     if (mask.width, mask.height) != image_size {
         return Err(SceneError::invalid(
-            &path,
+            path,
             format!(
                 "ignore mask is {}×{} but its image {} is {}×{}",
                 mask.width,
@@ -221,18 +217,21 @@ pub fn read_ignore_mask(
             ),
         ));
     }
-    Ok(Some(mask))
+    Ok(mask)
 }
 
 /// The masks of the view whose image file stem is `stem`, at the stored image size: per-class
 /// `masks_dir/<class>/<stem>.png` and, OR-ed into them, a colour-coded `masks_dir/<stem>.png`.
 /// Classes without a mask file are absent from the map. A mask whose size differs from the
-/// image's (`image_size`, before any scaling) is an error naming both files.
+/// image's (`image_size`, before any scaling) is an error naming both files. `ignore_mask`, the
+/// view's ignore mask when the dataset names one (nerfstudio keeps them as `masks/<stem>.png`),
+/// is not read as a colour-coded damage mask.
 pub fn read_view_masks(
     masks_dir: &Path,
     stem: &str,
     image_path: &Path,
     image_size: (u32, u32),
+    ignore_mask: Option<&Path>,
 ) -> Result<BTreeMap<DamageClass, Mask>, SceneError> {
     let file = format!("{stem}.png");
     let check = |path: &Path, mask: &Mask| -> Result<(), SceneError> {
@@ -261,7 +260,7 @@ pub fn read_view_masks(
         }
     }
     let coded = masks_dir.join(&file);
-    if coded.is_file() {
+    if coded.is_file() && ignore_mask != Some(coded.as_path()) {
         for (class, mask) in read_colour_mask(&coded, &default_palette())? {
             check(&coded, &mask)?;
             match masks.get_mut(&class) {
@@ -451,14 +450,14 @@ mod tests {
             .save(dir.path().join("crack/v.png"))
             .unwrap();
         let image = Path::new("/data/images/v.jpg");
-        let err = read_view_masks(dir.path(), "v", image, (8, 6))
+        let err = read_view_masks(dir.path(), "v", image, (8, 6), None)
             .unwrap_err()
             .to_string();
         assert!(
             err.contains("crack/v.png") && err.contains("/data/images/v.jpg"),
             "{err}"
         );
-        let ok = read_view_masks(dir.path(), "v", image, (4, 3)).unwrap();
+        let ok = read_view_masks(dir.path(), "v", image, (4, 3), None).unwrap();
         assert_eq!(ok.len(), 1);
     }
 

@@ -269,6 +269,7 @@ fn open_colmap(
             camera: Camera::new(pinhole.0, rotation, translation),
             distortion: pinhole.1,
             split: Split::Unspecified,
+            ignore_mask: None,
         });
     }
     if views.is_empty() {

@@ -67,6 +67,9 @@ impl Lens {
 #[derive(Debug, Deserialize)]
 struct Frame {
     file_path: String,
+    /// nerfstudio: the frame's ignore mask (0 = ignore), relative to the file's folder.
+    #[serde(default)]
+    mask_path: Option<String>,
     /// 4×4 (or 3×4) camera-to-world, rows, OpenGL camera axes.
     transform_matrix: Vec<Vec<f64>>,
     #[serde(flatten)]
@@ -293,12 +296,28 @@ fn read_json(
         out.cameras
             .push((model, camera_key(&intrinsics, distortion.as_ref())));
         out.referenced.insert(image_path.clone());
+        // A named mask that is not there is a dataset error: training on the whole photo would
+        // learn what the mask was made to keep out.
+        let ignore_mask = match &frame.mask_path {
+            Some(m) => {
+                let path = root.join(m);
+                if !path.is_file() {
+                    return Err(invalid(format!(
+                        "mask_path {} does not exist",
+                        path.display()
+                    )));
+                }
+                Some(path)
+            }
+            None => None,
+        };
         out.views.push(View {
             name: stem_of(&image_path),
             camera: Camera::from_opengl_camera_to_world(intrinsics, c2w),
             image_path,
             distortion,
             split,
+            ignore_mask,
         });
     }
     if !missing.is_empty() {

@@ -73,6 +73,10 @@ impl ViewPanel {
                     ui.add(egui::Slider::new(&mut s.compare_blend, 0.0..=1.0));
                     ui.end_row();
                 }
+                ui.label("Ignore masks");
+                ui.checkbox(&mut s.show_ignore_masks, "")
+                    .on_hover_text("Dim the parts of a photo its ignore mask keeps out of training");
+                ui.end_row();
             });
             ui.collapsing("Damage layer", |ui| {
                 let d = &mut s.damage;
