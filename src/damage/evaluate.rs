@@ -89,16 +89,36 @@ impl DamageScores {
     /// Adds one view: `predicted` and `reference` per class in `DamageClass::ALL` order; a class
     /// without a reference mask is not counted.
     pub fn add_view(&mut self, predicted: &[Mask], reference: &[Option<Mask>]) {
+        self.add_view_where(predicted, reference, None);
+    }
+
+    /// `add_view` counting only the pixels `used` marks (an ignore mask, 1 = use; all when
+    /// None or of another size).
+    pub fn add_view_where(
+        &mut self,
+        predicted: &[Mask],
+        reference: &[Option<Mask>],
+        used: Option<&Mask>,
+    ) {
         self.views += 1;
         for ((class, p), r) in DamageClass::ALL.iter().zip(predicted).zip(reference) {
             let Some(r) = r else { continue };
             if p.data.len() != r.data.len() {
                 continue;
             }
-            self.classes.entry(*class).or_default().accumulate(
-                p.data.iter().map(|&v| v != 0),
-                r.data.iter().map(|&v| v != 0),
-            );
+            let used = used.filter(|u| u.data.len() == p.data.len());
+            let pairs = p
+                .data
+                .iter()
+                .zip(&r.data)
+                .enumerate()
+                .filter(|&(i, _)| used.is_none_or(|u| u.data[i] != 0));
+            let (predicted, reference): (Vec<bool>, Vec<bool>) =
+                pairs.map(|(_, (&a, &b))| (a != 0, b != 0)).unzip();
+            self.classes
+                .entry(*class)
+                .or_default()
+                .accumulate(predicted, reference);
         }
     }
 
@@ -146,6 +166,8 @@ pub struct ReferenceView {
     pub name: String,
     pub camera: Camera,
     pub reference: Vec<Option<Mask>>,
+    /// The view's ignore mask (1 = use): ignored pixels are not scored.
+    pub used: Option<Mask>,
 }
 
 /// Renders every view and scores its damage against the references.
@@ -162,7 +184,7 @@ pub fn evaluate_damage(
     for view in views {
         rasterizer.forward(splats, &view.camera, &settings, &mut out);
         let predicted = predicted_masks(&out, readout);
-        scores.add_view(&predicted, &view.reference);
+        scores.add_view_where(&predicted, &view.reference, view.used.as_ref());
     }
     scores
 }
@@ -177,6 +199,19 @@ mod tests {
             height: 1,
             data: bits.to_vec(),
         }
+    }
+
+    #[test]
+    fn ignored_pixels_are_not_scored() {
+        let predicted = [mask(&[1, 1, 0, 0]), mask(&[0; 4]), mask(&[0; 4])];
+        let reference = [Some(mask(&[1, 0, 1, 0])), None, None];
+        let mut all = DamageScores::default();
+        all.add_view(&predicted, &reference);
+        // The false positive (pixel 1) and the miss (pixel 2) lie where the ignore mask is 0.
+        let mut used = DamageScores::default();
+        used.add_view_where(&predicted, &reference, Some(&mask(&[1, 0, 0, 1])));
+        assert!((all.per_class(MaskAgreement::iou)["crack"] - 1.0 / 3.0).abs() < 1e-12);
+        assert_eq!(used.per_class(MaskAgreement::iou)["crack"], 1.0);
     }
 
     #[test]

@@ -54,6 +54,7 @@ pub fn load_reference_views(
             Ok(ReferenceView {
                 name: dataset.views[index].name.clone(),
                 camera,
+                used: dataset.load_view_ignore(index, scale)?,
                 reference: DamageClass::ALL
                     .iter()
                     .map(|class| masks.remove(class))

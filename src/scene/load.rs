@@ -281,6 +281,29 @@ impl Dataset {
         Ok((Camera::resized(&camera, width, height), masks))
     }
 
+    /// View `index`'s ignore mask at `scale`, prepared as `load_view` prepares it (None when
+    /// the view has none). Reads only the image's header besides the mask.
+    pub fn load_view_ignore(
+        &self,
+        index: usize,
+        scale: ImageScale,
+    ) -> Result<Option<Mask>, SceneError> {
+        let view = self.view(index)?;
+        let Some(path) = self.ignore_mask_file(view) else {
+            return Ok(None);
+        };
+        let stored = crate::scene::files::image_size(&view.image_path)?;
+        let (camera, distortion) = stored_geometry(view, stored)?;
+        let size = loaded_size(view, scale, stored)?;
+        let mask = read_ignore_mask(&path, &view.image_path, stored)?;
+        Ok(Some(prepared_mask(
+            mask,
+            &camera,
+            distortion.as_ref(),
+            size,
+        )))
+    }
+
     /// View `index`'s camera at `scale`, as `load_view` would give it, from the image's header
     /// alone (no pixels, no masks).
     pub fn view_camera(&self, index: usize, scale: ImageScale) -> Result<Camera, SceneError> {
