@@ -44,6 +44,11 @@ pub struct Args {
     /// Overlay mode: colour distance (8-bit RGB) within which a pixel is a class colour.
     #[arg(long, default_value_t = damage_twin::damage::overlay::OVERLAY_TOLERANCE)]
     pub tolerance: f32,
+    /// Also score each held-out photo's right half after fitting its light (a gain and offset
+    /// per channel) to the render on its left half: the NeRF-W protocol for a model whose
+    /// training photos differ in exposure.
+    #[arg(long)]
+    pub half_appearance: bool,
 }
 
 #[derive(Serialize)]
@@ -58,6 +63,45 @@ struct Report {
     /// Per-class `iou`, `precision`, `recall`, `f1` on the held-out views.
     #[serde(flatten)]
     damage: Option<DamageFigures>,
+    /// `--half-appearance`: mean held-out PSNR of the right halves, light fitted on the left.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    psnr_half_appearance: Option<f64>,
+}
+
+/// The NeRF-W protocol: per held-out view, the light fitted on the left half of the photo (gain
+/// and offset per channel, `timeline::appearance::fit_transform`) is applied to the render, and
+/// PSNR is taken over the right half (used pixels only). The mean over views.
+fn half_appearance_psnr(
+    splats: &damage_twin::splats::Splats,
+    dataset: &damage_twin::scene::Dataset,
+    indices: &[usize],
+    scale: ImageScale,
+    background: Vec3,
+) -> anyhow::Result<f64> {
+    use damage_twin::raster::{RenderSettings, render};
+    let settings = RenderSettings::new(background, splats.sh_degree);
+    let mut total = 0.0;
+    for &index in indices {
+        let view = dataset.load_view(index, scale)?;
+        let out = render(splats, &view.camera, &settings);
+        let w = view.image.width as usize;
+        let used = |p: usize| view.ignore.as_ref().is_none_or(|m| m.data[p] != 0);
+        let light =
+            damage_twin::timeline::appearance::fit_transform(&out.color, &view.image.data, &|p| {
+                p % w < w / 2 && used(p)
+            });
+        let mut lit = damage_twin::scene::RgbImage {
+            width: out.width,
+            height: out.height,
+            data: out.color.clone(),
+        };
+        light.apply(&mut lit);
+        let right: Vec<u8> = (0..w * view.image.height as usize)
+            .map(|p| u8::from(p % w >= w / 2 && used(p)))
+            .collect();
+        total += damage_twin::metrics::psnr_masked(&lit.data, &view.image.data, &right);
+    }
+    Ok(total / indices.len().max(1) as f64)
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -78,6 +122,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         photometric: true,
         readout,
     };
+    let half = if args.half_appearance {
+        Some(half_appearance_psnr(
+            &splats,
+            &dataset,
+            &request.indices,
+            args.scale,
+            args.background,
+        )?)
+    } else {
+        None
+    };
     let job = evaluate_job(dataset, splats.clone(), request, JobOptions::headless(None));
     let scores = drive(job, "evaluation", args.json, |_| {})?;
     let report = Report {
@@ -88,6 +143,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         damage_mode: scores.damage.as_ref().map(|_| readout.mode),
         damage_reference: scores.damage_reference,
         damage: scores.damage,
+        psnr_half_appearance: half,
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -103,6 +159,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.ssim,
         report.gaussians
     );
+    if let Some(half) = report.psnr_half_appearance {
+        println!("right halves, light fitted on the left halves: PSNR {half:.2} dB");
+    }
     if let (Some(d), Some(mode)) = (&report.damage, report.damage_mode) {
         println!(
             "damage ({mode} mode, against {}):",

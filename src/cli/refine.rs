@@ -2,6 +2,7 @@
 //! damage (`damage::refine`). Writes `model.ply`, `selection.json`, `hulls/<view>.png`,
 //! `metrics.json` and a before/after render of one held-out view with the damage layer.
 
+use damage_twin::scene::run_folder::RunFolder;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -114,8 +115,12 @@ pub fn parse_classes(names: &[String]) -> anyhow::Result<Vec<DamageClass>> {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let model = Arc::new(read_model(&args.model)?);
     let dataset = Arc::new(open_dataset(&args.dataset, args.background)?);
-    std::fs::create_dir_all(args.out.join("hulls"))
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    // Staged beside the output folder and swapped in whole (scene::run_folder): a kill leaves
+    // the previous refinement's files or this one's, and an unwritable place fails now.
+    let outputs = RunFolder::begin(&args.out)
+        .with_context(|| format!("preparing output folder {}", args.out.display()))?;
+    std::fs::create_dir_all(outputs.path("hulls"))
+        .with_context(|| format!("creating {}", args.out.join("hulls").display()))?;
     let palette = palette(&args.colours)?;
     let mode = args
         .mode
@@ -151,7 +156,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         JobOptions::headless(args.threads),
     );
     let outcome = drive(job, "refinement", args.quiet, |_| {})?;
-    write_outputs(&args.out, &dataset, &model, &outcome, args.scale, palette)?;
+    let staging = outputs.path("");
+    write_outputs(&staging, &dataset, &model, &outcome, args.scale, palette)?;
+    outputs
+        .commit()
+        .with_context(|| format!("replacing {}", args.out.display()))?;
     let json = serde_json::to_string_pretty(&outcome.report)?;
     println!("{json}");
     Ok(())

@@ -15,6 +15,7 @@ use damage_twin::damage::evaluate::{DamageFigures, DamageReadout};
 use damage_twin::damage::setup::{RunConfig, effective_mode, train_job};
 use damage_twin::metrics::peak_rss_mb;
 use damage_twin::scene::atomic::write_atomic;
+use damage_twin::scene::run_folder::RunFolder;
 use damage_twin::train::job::JobOptions;
 use damage_twin::train::trainer::StageTimes;
 use damage_twin::train::views::split_views;
@@ -25,7 +26,8 @@ use super::args::{RunArgs, drive, open_dataset, palette};
 pub struct Args {
     /// Dataset folder (COLMAP, transforms.json or NeRF-synthetic).
     pub dataset: PathBuf,
-    /// Output folder for model.ply, metrics.json and curve.csv.
+    /// Output folder for model.ply, metrics.json and curve.csv (and appearance.json with
+    /// --appearance), replaced as a whole when the run ends.
     #[arg(long)]
     pub out: PathBuf,
     #[arg(long, default_value_t = 7000)]
@@ -38,6 +40,14 @@ pub struct Args {
     /// Cap on the Gaussian count (adaptive density control stops growing there).
     #[arg(long)]
     pub max_gaussians: Option<usize>,
+    /// Learn each photo's exposure and white balance (a gain and offset per channel) with the
+    /// model, so they are not baked into the Gaussians.
+    #[arg(long)]
+    pub appearance: bool,
+    /// With --appearance: the first step that goes through the photos' light (before it the
+    /// model is too rough for its error to be told from a photo's exposure).
+    #[arg(long, default_value_t = 0)]
+    pub appearance_from: u32,
     /// No progress bar (log lines only).
     #[arg(long)]
     pub quiet: bool,
@@ -97,11 +107,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let dataset = Arc::new(open_dataset(&args.dataset, args.run.background)?);
     let holdout = args.run.holdout.holdout();
     let (train_idx, test_idx) = split_views(&dataset, &holdout).map_err(anyhow::Error::msg)?;
-    // Fail on an unwritable output folder now, not after the whole run.
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating output folder {}", args.out.display()))?;
-    write_text(&args.out.join(".damage-twin-write-check"), "")?;
-    let _ = std::fs::remove_file(args.out.join(".damage-twin-write-check"));
+    // The run's files are staged beside the output folder and swapped in whole at the end
+    // (scene::run_folder): an unwritable place fails now, not after the run, and a kill at any
+    // moment leaves the previous outputs or the new ones, never a mix.
+    let outputs = RunFolder::begin(&args.out)
+        .with_context(|| format!("preparing output folder {}", args.out.display()))?;
 
     let palette = palette(&args.colours)?;
     let config = RunConfig {
@@ -119,6 +129,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         random_points: args.run.init_points,
         eval_every: args.eval_every,
         max_gaussians: args.max_gaussians,
+        appearance: args
+            .appearance
+            .then(|| damage_twin::train::appearance::AppearanceConfig {
+                start_step: args.appearance_from,
+                ..Default::default()
+            }),
     };
     let mode = effective_mode(&dataset, args.mode);
     let threads = args.run.threads.unwrap_or_else(rayon::current_num_threads);
@@ -218,11 +234,32 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     // The model first, the metrics last: metrics.json always describes the model beside it.
     let model_path = args.out.join("model.ply");
-    damage_twin::scene::ply::write_splats(&model_path, &outcome.splats)
+    damage_twin::scene::ply::write_splats(&outputs.path("model.ply"), &outcome.splats)
         .with_context(|| format!("writing {}", model_path.display()))?;
-    write_text(&args.out.join("curve.csv"), &curve)?;
+    write_text(&outputs.path("curve.csv"), &curve)?;
+    if !outcome.appearance.is_empty() {
+        // Each training photo's learnt light: photo ≈ gain ⊙ render + offset.
+        let lights: Vec<_> = train_idx
+            .iter()
+            .zip(&outcome.appearance)
+            .map(|(&i, light)| {
+                serde_json::json!({
+                    "view": dataset.views[i].name,
+                    "gain": [light.matrix[0][0], light.matrix[1][1], light.matrix[2][2]],
+                    "offset": light.offset,
+                })
+            })
+            .collect();
+        write_text(
+            &outputs.path("appearance.json"),
+            &serde_json::to_string_pretty(&lights)?,
+        )?;
+    }
     let json = serde_json::to_string_pretty(&metrics)?;
-    write_text(&args.out.join("metrics.json"), &json)?;
+    write_text(&outputs.path("metrics.json"), &json)?;
+    outputs
+        .commit()
+        .with_context(|| format!("replacing {}", args.out.display()))?;
     println!("{json}");
     Ok(())
 }

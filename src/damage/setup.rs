@@ -71,6 +71,8 @@ pub struct RunConfig {
     pub eval_every: u32,
     /// Cap on the Gaussian count (None: adaptive density control as in 3DGS).
     pub max_gaussians: Option<usize>,
+    /// Learn each training photo's exposure and white balance (`train::appearance`).
+    pub appearance: Option<crate::train::appearance::AppearanceConfig>,
 }
 
 impl Default for RunConfig {
@@ -94,6 +96,7 @@ impl Default for RunConfig {
             random_points: 100_000,
             eval_every: 0,
             max_gaussians: None,
+            appearance: None,
         }
     }
 }
@@ -226,6 +229,7 @@ pub fn model_and_spec(
     spec.seed = config.seed;
     spec.background = config.background;
     spec.eval_every = config.eval_every;
+    spec.appearance = config.appearance;
     spec.targets.label_weight = if label_channels > 0 {
         config.label_weight
     } else {

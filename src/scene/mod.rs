@@ -16,6 +16,7 @@ pub mod open;
 pub mod ply;
 pub mod points;
 pub mod project;
+pub mod run_folder;
 pub mod transforms;
 pub mod undistort;
 

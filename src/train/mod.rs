@@ -3,6 +3,7 @@
 //! Reads no files and draws nothing: inputs arrive as buffers, results leave as events.
 
 pub mod adam;
+pub mod appearance;
 pub mod densify;
 pub mod evaluate;
 pub mod guards;

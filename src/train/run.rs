@@ -36,6 +36,9 @@ pub struct TrainOutcome {
     pub rolled_back: u32,
     /// Accumulated time per stage over the run.
     pub timings: StageTimes,
+    /// Each training view's learnt light, in the spec's view order (empty unless the spec
+    /// learns it: `TrainSpec::appearance`).
+    pub appearance: Vec<crate::scene::project::ColourTransform>,
 }
 
 /// A training job.
@@ -125,6 +128,7 @@ pub fn run_training(
     train_time += started.elapsed();
     let steps = trainer.steps_done();
     let timings = trainer.timings().clone();
+    let appearance = trainer.appearance();
     let splats = Arc::new(trainer.into_splats());
     ctx.snapshot(splats.clone());
     Ok(TrainOutcome {
@@ -136,5 +140,6 @@ pub fn run_training(
         heldout: final_scores,
         rolled_back,
         timings,
+        appearance,
     })
 }

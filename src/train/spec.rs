@@ -186,6 +186,8 @@ pub struct TrainSpec {
     /// Each trainable Gaussian's scale stays within this factor of its size at the start
     /// (`scale_cap`; None: unbounded, as in a from-scratch run).
     pub max_scale_growth: Option<f32>,
+    /// Learn each training photo's light (`appearance`; None: the photos as they are).
+    pub appearance: Option<crate::train::appearance::AppearanceConfig>,
 }
 
 impl TrainSpec {
@@ -205,6 +207,7 @@ impl TrainSpec {
             seed: 0,
             eval_every: 0,
             max_scale_growth: None,
+            appearance: None,
         }
     }
 

@@ -14,6 +14,7 @@ use crate::raster::{
 use crate::scene::Mask;
 use crate::splats::{MAX_LABEL_CHANNELS, Splats};
 use crate::train::adam::{Adam, GroupFlags, LearningRates, ParamGrads};
+use crate::train::appearance::AppearanceModel;
 use crate::train::densify::{Densifier, camera_extent};
 use crate::train::evaluate::{EvalScores, evaluate_with};
 use crate::train::guards::first_non_finite_param;
@@ -129,6 +130,9 @@ pub struct Trainer {
     adam: Adam,
     densifier: Option<Densifier>,
     scale_cap: Option<ScaleCap>,
+    /// Per training view, its light (when the spec asks for it) and the render through it.
+    appearance: Option<AppearanceModel>,
+    lit_color: Vec<f32>,
     lrs: LearningRates,
     groups: GroupFlags,
     extent: f32,
@@ -259,6 +263,10 @@ impl Trainer {
             adam,
             densifier,
             scale_cap,
+            appearance: spec
+                .appearance
+                .map(|config| AppearanceModel::new(views.len(), config)),
+            lit_color: Vec::new(),
             lrs,
             groups,
             extent,
@@ -327,6 +335,14 @@ impl Trainer {
     }
 
     /// The trained model, with the input's frozen flags restored.
+    /// Each training view's learnt light (empty when the spec learns none).
+    pub fn appearance(&self) -> Vec<crate::scene::project::ColourTransform> {
+        self.appearance
+            .as_ref()
+            .map(|a| a.transforms())
+            .unwrap_or_default()
+    }
+
     pub fn into_splats(mut self) -> Splats {
         if let Some(saved) = &self.input_frozen {
             for (frozen, id) in self
@@ -388,9 +404,20 @@ impl Trainer {
         self.v_color.resize(self.out.color.len(), 0.0);
         let mut loss = 0.0f32;
         if targets.rgb_weight > 0.0 {
+            // Through the photo's light, when it is learnt: the loss compares that with the photo.
+            let appearance = self.appearance.as_mut().filter(|a| a.active_at(step));
+            let mut lit = std::mem::take(&mut self.lit_color);
+            if let Some(appearance) = &appearance {
+                appearance.apply(view_index, &self.out.color, &mut lit);
+            }
+            let rendered = if appearance.is_some() {
+                lit.as_slice()
+            } else {
+                self.out.color.as_slice()
+            };
             let photometric = photometric_loss(
                 &mut self.loss_ws,
-                &self.out.color,
+                rendered,
                 &view.image.data,
                 view.image.width,
                 view.image.height,
@@ -403,6 +430,11 @@ impl Trainer {
                 self.v_color
                     .iter_mut()
                     .for_each(|v| *v *= targets.rgb_weight);
+            }
+            self.lit_color = lit;
+            if let Some(appearance) = appearance {
+                loss +=
+                    appearance.backward_and_step(view_index, &self.out.color, &mut self.v_color);
             }
         } else {
             self.v_color.fill(0.0);

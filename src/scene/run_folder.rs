@@ -1,0 +1,356 @@
+//! A run's outputs replaced as one: every file of the run is written into a staging folder
+//! beside the target, and the staging folder then takes the target's place in one atomic step
+//! (Linux `renameat2(RENAME_EXCHANGE)`; elsewhere two renames, the gap between them repaired by
+//! the next run). A kill at any moment leaves either the previous run's folder intact or the new
+//! run's folder complete — never a new `model.ply` beside the old `metrics.json`. Anything else
+//! the user kept in the folder (renders, notes, subfolders) is carried over as a tree of hard
+//! links, so the user's files are in the folder whichever side of the swap a kill lands on.
+//!
+//! Stale staging folders of killed runs (their process gone) are removed when the next run on
+//! the same target begins.
+
+use std::fs;
+use std::io;
+use std::path::{Path, PathBuf};
+
+use crate::scene::SceneError;
+
+const STAGING_TAG: &str = ".staging-";
+const OLD_TAG: &str = ".replaced-";
+
+/// Test hook: `DAMAGE_TWIN_ABORT_AT=<point>` aborts the process (no destructors, like kill -9) at
+/// that point of the commit, so tests can check what a kill there leaves behind.
+const ABORT_ENV: &str = "DAMAGE_TWIN_ABORT_AT";
+
+fn abort_point(point: &str) {
+    if std::env::var(ABORT_ENV).is_ok_and(|p| p == point) {
+        std::process::abort();
+    }
+}
+
+/// The staging folder of one run; `commit` puts it in the target's place.
+#[derive(Debug)]
+pub struct RunFolder {
+    target: PathBuf,
+    staging: PathBuf,
+}
+
+impl RunFolder {
+    /// Creates the staging folder beside `target` (creating `target`'s parent if needed),
+    /// after cleaning up what killed runs left there. Fails now, before any work, when the
+    /// place is not writable.
+    pub fn begin(target: &Path) -> Result<RunFolder, SceneError> {
+        let name = target
+            .file_name()
+            .ok_or_else(|| SceneError::invalid(target, "not a folder name"))?
+            .to_string_lossy()
+            .into_owned();
+        let parent = match target.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        fs::create_dir_all(&parent).map_err(|e| SceneError::io(&parent, e))?;
+        if target.exists() && !target.is_dir() {
+            return Err(SceneError::invalid(target, "exists and is not a folder"));
+        }
+        recover(&parent, &name, target);
+        let staging = parent.join(format!(".{name}{STAGING_TAG}{}", std::process::id()));
+        if staging.exists() {
+            fs::remove_dir_all(&staging).map_err(|e| SceneError::io(&staging, e))?;
+        }
+        fs::create_dir(&staging).map_err(|e| SceneError::io(&staging, e))?;
+        Ok(RunFolder {
+            target: target.to_path_buf(),
+            staging,
+        })
+    }
+
+    /// Where the run writes its file `name`.
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.staging.join(name)
+    }
+
+    /// The folder the run's files end up in.
+    pub fn target(&self) -> &Path {
+        &self.target
+    }
+
+    /// Puts the staged files in the target's place, carrying over what else the target held.
+    /// The files must already be complete (written and closed); this syncs them.
+    pub fn commit(self) -> Result<(), SceneError> {
+        let staged = list(&self.staging).map_err(|e| SceneError::io(&self.staging, e))?;
+        for name in &staged {
+            let path = self.staging.join(name);
+            if path.is_file() {
+                fs::File::open(&path)
+                    .and_then(|f| f.sync_all())
+                    .map_err(|e| SceneError::io(&path, e))?;
+            }
+        }
+        if !self.target.exists() {
+            abort_point("before-swap");
+            fs::rename(&self.staging, &self.target).map_err(|e| SceneError::io(&self.target, e))?;
+            abort_point("after-swap");
+            sync_parent(&self.target);
+            return Ok(());
+        }
+        // Carry over the user's other entries (a tree of hard links), so the swap loses nothing
+        // and they are in the target on either side of it.
+        let kept = list(&self.target).map_err(|e| SceneError::io(&self.target, e))?;
+        for name in kept.iter().filter(|n| !staged.contains(n)) {
+            abort_point("carrying");
+            link_tree(&self.target.join(name), &self.staging.join(name))?;
+        }
+        abort_point("before-swap");
+        let old = swap(&self.staging, &self.target)?;
+        abort_point("after-swap");
+        sync_parent(&self.target);
+        // The previous run's files and the links to the user's.
+        let _ = fs::remove_dir_all(&old);
+        Ok(())
+    }
+}
+
+/// Recreates `from` at `to` with hard links to its files (copies where linking fails), its
+/// folders created anew and its symbolic links recreated, never followed.
+fn link_tree(from: &Path, to: &Path) -> Result<(), SceneError> {
+    let meta = fs::symlink_metadata(from).map_err(|e| SceneError::io(from, e))?;
+    let result = if meta.is_dir() {
+        fs::create_dir(to).map_err(|e| SceneError::io(to, e))?;
+        for name in list(from).map_err(|e| SceneError::io(from, e))? {
+            link_tree(&from.join(&name), &to.join(&name))?;
+        }
+        Ok(())
+    } else if meta.file_type().is_symlink() {
+        relink(from, to)
+    } else {
+        fs::hard_link(from, to).or_else(|_| fs::copy(from, to).map(|_| ()))
+    };
+    result.map_err(|e| SceneError::io(from, e))
+}
+
+#[cfg(unix)]
+fn relink(from: &Path, to: &Path) -> io::Result<()> {
+    std::os::unix::fs::symlink(fs::read_link(from)?, to)
+}
+
+#[cfg(not(unix))]
+fn relink(from: &Path, to: &Path) -> io::Result<()> {
+    fs::copy(from, to).map(|_| ())
+}
+
+impl Drop for RunFolder {
+    /// A run that fails or is cancelled before `commit` leaves nothing beside the target. After
+    /// a commit the staging path holds the previous folder (already removed) or nothing; it
+    /// only ever holds links to the user's files, never the files alone.
+    fn drop(&mut self) {
+        let _ = fs::remove_dir_all(&self.staging);
+    }
+}
+
+/// Swaps the staging folder into the target's place; returns where the previous folder is.
+fn swap(staging: &Path, target: &Path) -> Result<PathBuf, SceneError> {
+    #[cfg(target_os = "linux")]
+    if exchange(staging, target).is_ok() {
+        return Ok(staging.to_path_buf());
+    }
+    // Two renames; a kill between them leaves no target, and the next `begin` puts the
+    // previous folder back (`recover`).
+    let old = old_path(staging);
+    fs::rename(target, &old).map_err(|e| SceneError::io(target, e))?;
+    fs::rename(staging, target).map_err(|e| SceneError::io(target, e))?;
+    Ok(old)
+}
+
+fn old_path(staging: &Path) -> PathBuf {
+    let name = staging
+        .file_name()
+        .map(|n| n.to_string_lossy().replace(STAGING_TAG, OLD_TAG))
+        .unwrap_or_default();
+    staging.with_file_name(name)
+}
+
+/// Atomic exchange of two paths (both must exist).
+#[cfg(target_os = "linux")]
+fn exchange(a: &Path, b: &Path) -> io::Result<()> {
+    use std::ffi::CString;
+    use std::os::unix::ffi::OsStrExt;
+    let a = CString::new(a.as_os_str().as_bytes())?;
+    let b = CString::new(b.as_os_str().as_bytes())?;
+    // SAFETY: both pointers are NUL-terminated strings that live across the call; renameat2
+    // reads them and touches no other memory.
+    let rc = unsafe {
+        libc::renameat2(
+            libc::AT_FDCWD,
+            a.as_ptr(),
+            libc::AT_FDCWD,
+            b.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(io::Error::last_os_error())
+    }
+}
+
+/// Cleans up after killed runs on `target`: a missing target whose previous folder survives
+/// the two-rename swap is put back; stale staging and replaced folders are removed; stale
+/// temporary files of
+/// `scene::atomic` inside the target are removed. Best effort: a run must not fail because a
+/// dead run's leftovers could not be removed.
+fn recover(parent: &Path, name: &str, target: &Path) {
+    let Ok(entries) = list(parent) else { return };
+    let staging_prefix = format!(".{name}{STAGING_TAG}");
+    let old_prefix = format!(".{name}{OLD_TAG}");
+    for entry in &entries {
+        let (pid, is_old) = if let Some(pid) = entry.strip_prefix(&staging_prefix) {
+            (pid, false)
+        } else if let Some(pid) = entry.strip_prefix(&old_prefix) {
+            (pid, true)
+        } else {
+            continue;
+        };
+        let Ok(pid) = pid.parse::<u32>() else {
+            continue;
+        };
+        if process_alive(pid) {
+            continue;
+        }
+        let stale = parent.join(entry);
+        if is_old && !target.exists() {
+            let _ = fs::rename(&stale, target);
+            continue;
+        }
+        let _ = fs::remove_dir_all(&stale);
+    }
+    for entry in list(target).unwrap_or_default() {
+        if let Some(pid) = atomic_temp_pid(&entry)
+            && !process_alive(pid)
+        {
+            let _ = fs::remove_file(target.join(&entry));
+        }
+    }
+}
+
+/// The process id in a `scene::atomic` temporary name (`.<name>.<pid>.<n>.tmp`).
+fn atomic_temp_pid(entry: &str) -> Option<u32> {
+    let stem = entry.strip_prefix('.')?.strip_suffix(".tmp")?;
+    let mut parts = stem.rsplitn(3, '.');
+    let _unique = parts.next()?.parse::<u64>().ok()?;
+    parts.next()?.parse().ok()
+}
+
+fn process_alive(pid: u32) -> bool {
+    if pid == std::process::id() {
+        return true;
+    }
+    #[cfg(target_os = "linux")]
+    {
+        Path::new("/proc").join(pid.to_string()).exists()
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        // Without a cheap liveness check, only leftovers of this process count as live.
+        false
+    }
+}
+
+fn list(dir: &Path) -> io::Result<Vec<String>> {
+    let mut names = Vec::new();
+    for entry in fs::read_dir(dir)? {
+        names.push(entry?.file_name().to_string_lossy().into_owned());
+    }
+    names.sort();
+    Ok(names)
+}
+
+fn sync_parent(path: &Path) {
+    if let Some(parent) = path.parent()
+        && let Ok(dir) = fs::File::open(if parent.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            parent
+        })
+    {
+        let _ = dir.sync_all();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(path: &Path, text: &str) {
+        fs::write(path, text).unwrap();
+    }
+
+    #[test]
+    fn a_new_target_is_created_and_an_old_one_replaced_keeping_the_users_files() {
+        let tmp = tempfile::tempdir().unwrap();
+        let target = tmp.path().join("run");
+        let run = RunFolder::begin(&target).unwrap();
+        write(&run.path("model.ply"), "one");
+        run.commit().unwrap();
+        assert_eq!(fs::read_to_string(target.join("model.ply")).unwrap(), "one");
+
+        write(&target.join("notes.txt"), "mine");
+        fs::create_dir(target.join("renders")).unwrap();
+        write(&target.join("renders/a.png"), "png");
+        let run = RunFolder::begin(&target).unwrap();
+        write(&run.path("model.ply"), "two");
+        write(&run.path("metrics.json"), "{}");
+        run.commit().unwrap();
+        assert_eq!(fs::read_to_string(target.join("model.ply")).unwrap(), "two");
+        assert_eq!(
+            fs::read_to_string(target.join("notes.txt")).unwrap(),
+            "mine"
+        );
+        assert_eq!(
+            fs::read_to_string(target.join("renders/a.png")).unwrap(),
+            "png"
+        );
+        // Nothing but the target is left beside it.
+        assert_eq!(list(tmp.path()).unwrap(), vec!["run".to_string()]);
+    }
+
+    #[test]
+    fn leftovers_of_dead_runs_are_cleaned() {
+        let tmp = tempfile::tempdir().unwrap();
+        let target = tmp.path().join("run");
+        fs::create_dir(&target).unwrap();
+        write(&target.join("model.ply"), "old");
+        // No process has id u32::MAX - 1 on Linux (pid_max is at most 2^22).
+        let dead = u32::MAX - 1;
+        write(&target.join(format!(".model.ply.{dead}.0.tmp")), "half");
+        let stale = tmp.path().join(format!(".run{STAGING_TAG}{dead}"));
+        fs::create_dir_all(&stale).unwrap();
+        write(&stale.join("model.ply"), "new but never swapped in");
+
+        let run = RunFolder::begin(&target).unwrap();
+        assert!(!stale.exists());
+        assert!(!target.join(format!(".model.ply.{dead}.0.tmp")).exists());
+        assert_eq!(fs::read_to_string(target.join("model.ply")).unwrap(), "old");
+        drop(run);
+    }
+
+    #[test]
+    fn a_kill_between_the_two_renames_is_repaired_by_the_next_run() {
+        let tmp = tempfile::tempdir().unwrap();
+        let target = tmp.path().join("run");
+        let dead = u32::MAX - 1;
+        let old = tmp.path().join(format!(".run{OLD_TAG}{dead}"));
+        fs::create_dir(&old).unwrap();
+        write(&old.join("model.ply"), "old");
+        let _run = RunFolder::begin(&target).unwrap();
+        assert_eq!(fs::read_to_string(target.join("model.ply")).unwrap(), "old");
+    }
+
+    #[test]
+    fn atomic_temp_names_give_their_pid() {
+        assert_eq!(atomic_temp_pid(".model.ply.4242.7.tmp"), Some(4242));
+        assert_eq!(atomic_temp_pid("model.ply"), None);
+        assert_eq!(atomic_temp_pid(".notes.tmp"), None);
+    }
+}
