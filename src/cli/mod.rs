@@ -6,6 +6,7 @@ mod bench;
 mod bench_render;
 mod demo;
 mod eval;
+mod export;
 mod inspect;
 mod launch;
 mod refine;
@@ -46,6 +47,8 @@ enum Command {
     Refine(refine::Args),
     /// Render one view of a model to a PNG.
     Render(render::Args),
+    /// Write a model for other viewers as SPZ (compressed) or PLY, with its bytes per Gaussian.
+    Export(export::Args),
     /// The inspection report of a twin project: damage regions measured per survey (lengths,
     /// widths, areas, growth, new regions) as report.html and report.json.
     Report(report::Args),
@@ -79,6 +82,7 @@ pub fn main() -> ExitCode {
         Some(Command::Eval(args)) => eval::run(args),
         Some(Command::Refine(args)) => refine::run(args),
         Some(Command::Render(args)) => render::run(args),
+        Some(Command::Export(args)) => export::run(args),
         Some(Command::Report(args)) => report::run(args),
         Some(Command::Bench(args)) => bench::run(args),
         Some(Command::BenchRender(args)) => bench_render::run(args),
