@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 use damage_twin::damage::evaluate::{DamageReadout, evaluate_damage};
 use damage_twin::damage::reference::{load_reference_views, reference_source};
 use damage_twin::damage::setup::{RunConfig, prepare_run};
-use damage_twin::damage::study::{StudyConfig, run_study};
+use damage_twin::damage::study::{NoiseModel, StudyConfig, run_study};
 use damage_twin::damage::{DamageClass, Palette, TrainMode};
 use damage_twin::metrics::MaskAgreement;
 use damage_twin::scene::open::OpenOptions;
@@ -197,6 +197,7 @@ fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks
         run: RunConfig {
             ..config(TrainMode::Label, 300)
         },
+        noise: NoiseModel::Views,
         noise_seed: 5,
         threads: None,
     };
@@ -233,5 +234,22 @@ fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks
         if class == DamageClass::Spalling {
             assert!(noisy.twin_iou_train > 0.05, "{noisy:?}");
         }
+    }
+
+    // The paper's model: every view corrupted by 0.4 × its own damage area per class.
+    let area = StudyConfig {
+        rates: vec![0.4],
+        noise: NoiseModel::Area,
+        ..study
+    };
+    let rows = run_study(survey(), &area, &mut |_| {}).expect("study runs");
+    for r in rows.iter().filter(|r| r.class != DamageClass::Rebar) {
+        eprintln!("{r:?}");
+        assert_eq!(r.noisy_views, 21, "every training view");
+        // Added and removed regions of 0.4 × the damage: IoU about 1 / 1.4 or less.
+        assert!((0.45..0.85).contains(&r.input_iou), "{r:?}");
+        assert!(r.corrupted_pixels > 0, "{r:?}");
+        assert!((0.0..=1.0).contains(&r.errors_corrected), "{r:?}");
+        assert!((0.0..0.2).contains(&r.errors_introduced), "{r:?}");
     }
 }

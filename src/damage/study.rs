@@ -1,8 +1,12 @@
-//! The mask-noise study: how much segmentation error the twin removes. At each corruption rate a
-//! fraction of the training views get blobs added to and cut out of their (clean) masks, as
-//! `synth --mask-noise` does; the twin is trained on them in each mode and its rendered masks are
-//! compared with the clean ones, on the training views (does multi-view consistency outvote the
-//! errors?) and on held-out views (does the twin generalise?).
+//! The mask-noise study: how much segmentation error the twin removes. At each corruption rate
+//! the training masks get irregular regions added and cut out: by default in every view, with an
+//! error of `rate ×` that view's damage area per class (the published method's Figure 11, so
+//! every view contradicts the others somewhere: `NoiseModel::Area`); or, as `synth --mask-noise`
+//! does, in a fraction `rate` of the views (`NoiseModel::Views`). The twin is trained on them in
+//! each mode and its rendered masks are compared with the clean ones: of the pixels the
+//! corruption got wrong, the share it puts right (errors corrected); of those it left right, the
+//! share the twin gets wrong (errors introduced); and IoU on the training views (does multi-view
+//! consistency outvote the errors?) and on held-out views (does the twin generalise?).
 
 use std::time::Instant;
 
@@ -19,17 +23,41 @@ use crate::metrics::MaskAgreement;
 use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
 use crate::scene::masks::resize_mask_nearest;
 use crate::scene::{Dataset, Mask};
-use crate::synth::corrupt::{corrupt_class_mask, noisy_views};
+use crate::synth::corrupt::{corrupt_class_mask, corrupt_mask_by_area, noisy_views};
 use crate::train::job::{JobEvent, JobOptions};
 use crate::train::run::{TrainSetup, train};
 use crate::train::spec::TrainView;
 use crate::train::views::{load_views, split_views};
 
+/// How the training masks are corrupted at a rate.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NoiseModel {
+    /// Every view, with an error of `rate ×` its damage area per class.
+    #[default]
+    Area,
+    /// A fraction `rate` of the views, a few blobs each (`synth --mask-noise`).
+    Views,
+}
+
+impl std::str::FromStr for NoiseModel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "area" => Ok(NoiseModel::Area),
+            "views" => Ok(NoiseModel::Views),
+            other => Err(format!("unknown noise model {other:?}: use area or views")),
+        }
+    }
+}
+
 /// The study's settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StudyConfig {
-    /// Fractions of training views whose masks are corrupted.
+    /// Error per view as a fraction of its damage area (`Area`), or the fraction of training
+    /// views whose masks are corrupted (`Views`).
     pub rates: Vec<f32>,
+    pub noise: NoiseModel,
     pub modes: Vec<TrainMode>,
     /// The run at every rate and mode (its `mode` is replaced by each of `modes`).
     pub run: RunConfig,
@@ -64,17 +92,25 @@ pub struct StudyRow {
     /// IoU of the twin against the clean masks on the same (corrupted) views.
     #[serde(deserialize_with = "nan_if_null")]
     pub twin_iou_noisy_views: f64,
-    /// Pixels of the corrupted views where the corrupted mask disagrees with the clean one.
+    /// Pixels of the training views where the corrupted mask disagrees with the clean one.
     pub corrupted_pixels: u64,
-    /// Of those, the fraction the twin renders as the clean mask has them (error removed).
-    #[serde(deserialize_with = "nan_if_null")]
-    pub corrupted_pixels_corrected: f64,
+    /// Of those, the fraction the twin renders as the clean mask has them (errors corrected).
+    #[serde(deserialize_with = "nan_if_null", alias = "corrupted_pixels_corrected")]
+    pub errors_corrected: f64,
+    /// Of the training-view pixels where the corrupted mask is right, the fraction the twin
+    /// renders wrong (errors introduced; at rate 0, the clean-mask twin's own error).
+    #[serde(deserialize_with = "nan_if_null", default = "nan")]
+    pub errors_introduced: f64,
     /// Views whose masks were corrupted, of the training views.
     pub noisy_views: usize,
     #[serde(deserialize_with = "nan_if_null")]
     pub train_seconds: f64,
     pub gaussians: usize,
     pub heldout_psnr: Option<f64>,
+}
+
+fn nan() -> f64 {
+    f64::NAN
 }
 
 /// JSON has no NaN (serde_json writes null): read null back as NaN.
@@ -133,7 +169,7 @@ pub fn run_study(
     let mut rows = Vec::new();
     let mut run = 0;
     for &rate in &config.rates {
-        let (noisy, corrupted) = corrupt(&clean, rate, config.noise_seed);
+        let (noisy, corrupted) = corrupt(&clean, config.noise, rate, config.noise_seed);
         let input = agreement(&corrupted, &clean.reference, None);
         let input_noisy = agreement(&corrupted, &clean.reference, Some(&noisy));
         for &mode in &config.modes {
@@ -271,8 +307,16 @@ fn structure_pixels(dataset: &Dataset, name: &str, width: u32, height: u32) -> V
 }
 
 /// The training masks at `rate`: which views are noisy, and per view per class the masks.
-fn corrupt(clean: &CleanTraining, rate: f32, seed: u64) -> (Vec<bool>, Vec<Vec<Mask>>) {
-    let noisy = noisy_views(clean.views.len(), rate, seed);
+fn corrupt(
+    clean: &CleanTraining,
+    noise: NoiseModel,
+    rate: f32,
+    seed: u64,
+) -> (Vec<bool>, Vec<Vec<Mask>>) {
+    let noisy = match noise {
+        NoiseModel::Area => vec![rate > 0.0; clean.views.len()],
+        NoiseModel::Views => noisy_views(clean.views.len(), rate, seed),
+    };
     let mut rng = fastrand::Rng::with_seed(seed ^ 0x5EED_0FB1_0B00);
     let masks = clean
         .views
@@ -284,7 +328,14 @@ fn corrupt(clean: &CleanTraining, rate: f32, seed: u64) -> (Vec<bool>, Vec<Vec<M
             if is_noisy {
                 for (class, mask) in DamageClass::ALL.iter().zip(masks.iter_mut()) {
                     let (w, h) = (mask.width as usize, mask.height as usize);
-                    corrupt_class_mask(*class, &mut mask.data, w, h, building, &mut rng);
+                    match noise {
+                        NoiseModel::Area => {
+                            corrupt_mask_by_area(&mut mask.data, w, h, building, rate, &mut rng);
+                        }
+                        NoiseModel::Views => {
+                            corrupt_class_mask(*class, &mut mask.data, w, h, building, &mut rng)
+                        }
+                    }
                 }
             }
             masks
@@ -317,6 +368,9 @@ struct TrainingScores {
     /// Per class in `DamageClass::ALL` order: (corrupted pixels the twin renders as the clean
     /// mask has them, corrupted pixels).
     corrected: [(u64, u64); 3],
+    /// Per class: (pixels the input has right that the twin renders wrong, pixels the input
+    /// has right).
+    introduced: [(u64, u64); 3],
 }
 
 fn score_training_views(
@@ -334,24 +388,29 @@ fn score_training_views(
         all: DamageScores::default(),
         noisy: DamageScores::default(),
         corrected: [(0, 0); 3],
+        introduced: [(0, 0); 3],
     };
     for (i, view) in clean.reference.iter().enumerate() {
         rasterizer.forward(splats, &view.camera, &settings, &mut out);
         let predicted = predicted_masks(&out, readout);
         scores.all.add_view(&predicted, &view.reference);
-        if !noisy[i] {
-            continue;
+        if noisy[i] {
+            scores.noisy.add_view(&predicted, &view.reference);
         }
-        scores.noisy.add_view(&predicted, &view.reference);
         for (k, reference) in view.reference.iter().enumerate() {
             let Some(reference) = reference else { continue };
             let input = &corrupted[i][k].data;
             for ((&r, &c), &p) in reference.data.iter().zip(input).zip(&predicted[k].data) {
-                if (r != 0) != (c != 0) {
-                    scores.corrected[k].1 += 1;
-                    if (p != 0) == (r != 0) {
-                        scores.corrected[k].0 += 1;
-                    }
+                let twin_right = (p != 0) == (r != 0);
+                let counts = if (r != 0) != (c != 0) {
+                    &mut scores.corrected[k]
+                } else {
+                    &mut scores.introduced[k]
+                };
+                counts.1 += 1;
+                // corrected counts the twin right, introduced the twin wrong.
+                if twin_right == ((r != 0) != (c != 0)) {
+                    counts.0 += 1;
                 }
             }
         }
@@ -404,6 +463,14 @@ fn rows_for(
         })
         .map(|&class| {
             let (fixed, wrong) = train.corrected[class.channel()];
+            let (broken, right) = train.introduced[class.channel()];
+            let share = |part: u64, whole: u64| {
+                if whole > 0 {
+                    part as f64 / whole as f64
+                } else {
+                    f64::NAN
+                }
+            };
             StudyRow {
                 mode,
                 rate,
@@ -417,11 +484,8 @@ fn rows_for(
                 input_iou_noisy_views: figure(input.noisy, class, MaskAgreement::iou),
                 twin_iou_noisy_views: figure(&train.noisy, class, MaskAgreement::iou),
                 corrupted_pixels: wrong,
-                corrupted_pixels_corrected: if wrong > 0 {
-                    fixed as f64 / wrong as f64
-                } else {
-                    f64::NAN
-                },
+                errors_corrected: share(fixed, wrong),
+                errors_introduced: share(broken, right),
                 noisy_views: input.noisy_views,
                 train_seconds,
                 gaussians,

@@ -99,7 +99,7 @@ where
         .build_cartesian_2d(-0.02..max_rate * 1.05, 0.0..1.0)?;
     chart
         .configure_mesh()
-        .x_desc("fraction of training views with corrupted masks")
+        .x_desc("corruption rate (error / damage area per view, or share of views corrupted)")
         .y_desc("IoU")
         .draw()?;
     let rows_with_noise: Vec<StudyRow> = rows
@@ -275,8 +275,8 @@ pub fn write_study_chart(
 /// The rows as a Markdown table (for docs/).
 pub fn study_table(rows: &[StudyRow]) -> String {
     let mut text = String::from(
-        "| mode | rate | class | input IoU | twin IoU (train views) | twin IoU (held-out) | twin F1 (held-out) | input IoU (corrupted views) | twin IoU (corrupted views) | corrupted pixels corrected |\n\
-         |---|---|---|---|---|---|---|---|---|---|\n",
+        "| mode | rate | class | input IoU | twin IoU (train views) | twin IoU (held-out) | twin F1 (held-out) | input IoU (corrupted views) | twin IoU (corrupted views) | errors corrected | errors introduced |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     // No corrupted views at rate 0: those columns have nothing to show.
     let value = |v: f64| {
@@ -290,15 +290,20 @@ pub fn study_table(rows: &[StudyRow]) -> String {
         let corrected = if r.corrupted_pixels > 0 {
             format!(
                 "{:.1} % of {}",
-                100.0 * r.corrupted_pixels_corrected,
+                100.0 * r.errors_corrected,
                 r.corrupted_pixels
             )
         } else {
             "–".to_string()
         };
+        let introduced = if r.errors_introduced.is_finite() {
+            format!("{:.2} %", 100.0 * r.errors_introduced)
+        } else {
+            "–".to_string()
+        };
         let _ = writeln!(
             text,
-            "| {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.mode,
             r.rate,
             r.class,
@@ -308,7 +313,8 @@ pub fn study_table(rows: &[StudyRow]) -> String {
             value(r.twin_f1_heldout),
             value(r.input_iou_noisy_views),
             value(r.twin_iou_noisy_views),
-            corrected
+            corrected,
+            introduced
         );
     }
     text
@@ -319,12 +325,12 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
     let mut text = String::from(
         "mode,rate,class,input_iou,twin_iou_train,twin_iou_heldout,twin_f1_heldout,\
          twin_precision_heldout,twin_recall_heldout,input_iou_noisy_views,twin_iou_noisy_views,\
-         corrupted_pixels,corrupted_pixels_corrected,noisy_views,train_seconds,gaussians,heldout_psnr\n",
+         corrupted_pixels,errors_corrected,errors_introduced,noisy_views,train_seconds,gaussians,heldout_psnr\n",
     );
     for r in rows {
         let _ = writeln!(
             text,
-            "{},{},{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.5},{},{:.2},{},{}",
+            "{},{},{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.5},{:.5},{},{:.2},{},{}",
             r.mode,
             r.rate,
             r.class,
@@ -337,7 +343,8 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
             r.input_iou_noisy_views,
             r.twin_iou_noisy_views,
             r.corrupted_pixels,
-            r.corrupted_pixels_corrected,
+            r.errors_corrected,
+            r.errors_introduced,
             r.noisy_views,
             r.train_seconds,
             r.gaussians,

@@ -81,6 +81,57 @@ pub fn corrupt_mask(
     }
 }
 
+/// Corrupts one binary (0/1) mask the way the published method's Figure 11 does, with an error
+/// proportional to the view's own damage: irregular regions added and removed until about
+/// `rate × damage area` pixels differ from the clean mask, half false (added, half of them next to
+/// the damage, half anywhere on the structure) and half missed (cut out of the damage). A view
+/// without damage is left clean. Returns the pixels changed.
+pub fn corrupt_mask_by_area(
+    mask: &mut [u8],
+    width: usize,
+    height: usize,
+    building: &[bool],
+    rate: f32,
+    rng: &mut fastrand::Rng,
+) -> usize {
+    let on: Vec<usize> = (0..mask.len()).filter(|&i| mask[i] != 0).collect();
+    let target = (rate * on.len() as f32).round() as usize;
+    if target == 0 {
+        return 0;
+    }
+    let clean = mask.to_vec();
+    let changed = |mask: &[u8]| mask.iter().zip(&clean).filter(|(a, b)| a != b).count();
+    let candidates: Vec<usize> = (0..building.len()).filter(|&i| building[i]).collect();
+    let max_radius = 28.0 * (width as f32 / 960.0).max(0.1);
+    // Each kind gets half the error; a blob is sized to what is left of its half, so small
+    // errors come as small regions and large ones as a few larger regions.
+    for (value, share) in [(0u8, target / 2), (1u8, target - target / 2)] {
+        let goal = changed(mask) + share;
+        for _ in 0..400 {
+            let now = changed(mask);
+            if now >= goal {
+                break;
+            }
+            let left = (goal - now) as f32;
+            let anywhere = value == 1 && !candidates.is_empty() && rng.bool();
+            let centre = if anywhere {
+                candidates[rng.usize(0..candidates.len())]
+            } else {
+                on[rng.usize(0..on.len())]
+            };
+            // Removing from a thin crack clears about a diameter's length of it per blob; adding
+            // fills the blob's area.
+            let radius = if value == 0 {
+                (left / 2.0).clamp(1.5, max_radius)
+            } else {
+                (left / std::f32::consts::PI).sqrt().clamp(1.5, max_radius)
+            };
+            blob(mask, width, height, centre, radius, value, rng.u32(..));
+        }
+    }
+    changed(mask)
+}
+
 /// Sets an irregular blob (radius modulated by angular noise) to `value`.
 fn blob(
     mask: &mut [u8],
@@ -113,6 +164,44 @@ fn blob(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn area_corruption_changes_about_the_rate_times_the_damage() {
+        let (w, h) = (240, 135);
+        let building = vec![true; w * h];
+        for (rate, seed) in [(0.1f32, 1u64), (0.4, 2), (0.8, 3)] {
+            let mut mask = vec![0u8; w * h];
+            // A 3-pixel-wide crack-like band and a 30×20 patch: 930 + 600 pixels.
+            for x in 20..330.min(w) {
+                for y in 60..63 {
+                    mask[y * w + x.min(w - 1)] = 1;
+                }
+            }
+            for y in 10..30 {
+                for x in 150..180 {
+                    mask[y * w + x] = 1;
+                }
+            }
+            let area = mask.iter().filter(|&&v| v != 0).count();
+            let clean = mask.clone();
+            let mut rng = fastrand::Rng::with_seed(seed);
+            let changed = corrupt_mask_by_area(&mut mask, w, h, &building, rate, &mut rng);
+            let expected = rate * area as f32;
+            assert!(
+                (changed as f32) >= expected && (changed as f32) < expected * 1.6 + 60.0,
+                "rate {rate}: {changed} changed of {area}"
+            );
+            let added = mask.iter().zip(&clean).filter(|&(&m, &c)| m > c).count();
+            let removed = mask.iter().zip(&clean).filter(|&(&m, &c)| m < c).count();
+            assert!(added > 0 && removed > 0, "rate {rate}: +{added} -{removed}");
+        }
+        let mut empty = vec![0u8; w * h];
+        let mut rng = fastrand::Rng::with_seed(4);
+        assert_eq!(
+            corrupt_mask_by_area(&mut empty, w, h, &building, 0.8, &mut rng),
+            0
+        );
+    }
 
     #[test]
     fn noisy_views_picks_the_rounded_fraction() {

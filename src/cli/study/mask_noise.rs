@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use damage_twin::damage::TrainMode;
 use damage_twin::damage::setup::RunConfig;
-use damage_twin::damage::study::{StudyConfig, StudyEvent, StudyRow, run_study};
+use damage_twin::damage::study::{NoiseModel, StudyConfig, StudyEvent, StudyRow, run_study};
 use damage_twin::report::study_chart::{study_csv, study_table, write_study_chart};
 use damage_twin::scene::ImageScale;
 
@@ -24,9 +24,14 @@ pub struct MaskNoiseArgs {
     pub dataset: PathBuf,
     #[arg(long)]
     pub out: PathBuf,
-    /// Fractions of the training views whose masks are corrupted.
-    #[arg(long, value_delimiter = ',', default_value = "0,0.1,0.2,0.4")]
+    /// Error per training view as a fraction of its damage area (--noise area), or the
+    /// fraction of training views whose masks are corrupted (--noise views).
+    #[arg(long, value_delimiter = ',', default_value = "0,0.1,0.2,0.4,0.8")]
     pub rates: Vec<f32>,
+    /// area: every view, error = rate × its damage area per class (the paper's Figure 11);
+    /// views: a fraction of the views, a few blobs each (synth --mask-noise).
+    #[arg(long, default_value = "area")]
+    pub noise: NoiseModel,
     /// Modes to train in.
     #[arg(long, value_delimiter = ',', default_value = "label,overlay")]
     pub modes: Vec<TrainMode>,
@@ -75,6 +80,7 @@ fn write_reports(dir: &std::path::Path, rows: &[StudyRow]) -> anyhow::Result<Vec
 #[derive(Serialize)]
 struct StudyFile<'a> {
     dataset: &'a std::path::Path,
+    noise: NoiseModel,
     rates: &'a [f32],
     modes: &'a [TrainMode],
     iterations: u32,
@@ -118,6 +124,7 @@ pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
             label_weight: args.label_weight,
             ..RunConfig::default()
         },
+        noise: args.noise,
         noise_seed: args.seed,
         threads: args.threads,
     };
@@ -138,8 +145,15 @@ pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
         StudyEvent::RunFinished { rows, .. } => {
             for r in rows {
                 let line = format!(
-                    "{} rate {:.2} {:<9} input IoU {:.3} → twin IoU {:.3} (train views), {:.3} (held-out)",
-                    r.mode, r.rate, r.class, r.input_iou, r.twin_iou_train, r.twin_iou_heldout
+                    "{} rate {:.2} {:<9} input IoU {:.3} → twin IoU {:.3} (train views), {:.3} (held-out); errors corrected {:.1} %, introduced {:.2} %",
+                    r.mode,
+                    r.rate,
+                    r.class,
+                    r.input_iou,
+                    r.twin_iou_train,
+                    r.twin_iou_heldout,
+                    100.0 * r.errors_corrected,
+                    100.0 * r.errors_introduced
                 );
                 print_line(&bar, line);
             }
@@ -151,6 +165,7 @@ pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
     let seconds = started.elapsed().as_secs_f64();
     let file = StudyFile {
         dataset: &args.dataset,
+        noise: args.noise,
         rates: &args.rates,
         modes: &args.modes,
         iterations: args.iters,
