@@ -2,10 +2,11 @@
 //! inputs (`fuzz_support/targets.rs`, with two small real files from
 //! `../shared/data/crackforest`) are mutated (`fuzz_support/mutate.rs`) —
 //! bit flips, byte inserts and deletes, truncation, header lies (PLY counts and formats, PNG and
-//! JPEG sizes, COLMAP counts), NaN/Inf and huge numbers, wrong JSON/RON types, repeated lines —
-//! and read back through the public API. Every case must end in `Ok` or a typed `SceneError`
-//! whose message is one line naming a file of the case, never a panic (caught, with its
-//! location) and never more than `CASE_LIMIT`.
+//! JPEG sizes, COLMAP counts, SPZ headers: an SPZ payload is re-gzipped so they reach the
+//! decoder), NaN/Inf and huge numbers, wrong JSON/RON types, repeated lines — and read back
+//! through the public API. Every case must end in `Ok` or a typed `SceneError` whose message is
+//! one line naming a file of the case, never a panic (caught, with its location) and never more
+//! than `CASE_LIMIT`.
 //!
 //! `cargo test --test fuzz_readers` runs a bounded number of cases (measured in docs/ROBUSTNESS.md).
 //! The long run:
@@ -30,10 +31,10 @@ use std::time::{Duration, Instant};
 use fuzz_support::mutate::{Content, image_size_lie, mutate};
 use fuzz_support::targets::{
     Target, colmap_target, images_target, masks_target, ply_points_target, ply_splats_target,
-    project_target, transforms_target,
+    project_target, spz_target, transforms_target,
 };
 
-/// Total cases of a plain `cargo test`, spread over the 8 targets: 10 000 took 18.7 to 27.4 s in
+/// Total cases of a plain `cargo test`, spread over the 9 targets: 10 000 took 18.7 to 27.4 s in
 /// the dev profile on the project's two-core machine shared with other builds
 /// (docs/ROBUSTNESS.md), under the 60 s budget.
 const DEFAULT_CASES: usize = 10_000;
@@ -72,7 +73,7 @@ fn config() -> Config {
 }
 
 /// The number of `fuzz_target!` tests below (the total case count is split over them).
-const TARGETS: usize = 8;
+const TARGETS: usize = 9;
 
 // ---------------------------------------------------------------------------------------------
 // The runner
@@ -264,6 +265,7 @@ fuzz_target!(masks_never_panic, masks_target());
 fuzz_target!(transforms_json_never_panics, transforms_target());
 fuzz_target!(ply_splats_never_panic, ply_splats_target());
 fuzz_target!(ply_point_clouds_never_panic, ply_points_target());
+fuzz_target!(spz_never_panics, spz_target());
 fuzz_target!(twin_ron_never_panics, project_target());
 
 /// The mutations themselves: each kind changes its input, and a case is reproducible from its

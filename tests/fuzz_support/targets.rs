@@ -372,6 +372,66 @@ pub fn ply_splats_target() -> Target {
     }
 }
 
+/// The SPZ reader: files of versions 3 and 2 (mutations mostly break the gzip stream), and the
+/// decompressed payload, which the case gzips before decoding so that header lies, short
+/// attribute blocks and odd values reach the decoder itself.
+pub fn spz_target() -> Target {
+    use damage_twin::scene::spz::{SpzOptions, SpzVersion, read_spz, write_spz};
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let mut splats = Splats::empty(2, 0);
+    for g in 0..5 {
+        let sh: Vec<f32> = (0..27).map(|i| (g * 27 + i) as f32 * 0.004 - 0.2).collect();
+        splats.push(
+            Vec3::new(g as f32, -0.5 * g as f32, 1.0),
+            Vec3::splat(-2.0 + 0.1 * g as f32),
+            Quat::from_xyzw(0.1 * g as f32, 0.2, -0.3, 0.9).normalize(),
+            0.5,
+            &sh,
+            &[],
+            10 + g as u64,
+            0,
+        );
+    }
+    for (name, version) in [("v3.spz", SpzVersion::V3), ("v2.spz", SpzVersion::V2)] {
+        write_spz(&root.join(name), &splats, &SpzOptions::new(version)).unwrap();
+    }
+    let compressed = std::fs::read(root.join("v3.spz")).unwrap();
+    let mut payload = Vec::new();
+    std::io::Read::read_to_end(
+        &mut flate2::read::GzDecoder::new(compressed.as_slice()),
+        &mut payload,
+    )
+    .unwrap();
+    std::fs::write(root.join("payload.bin"), payload).unwrap();
+    let seeds = vec![
+        seed(root, "v3.spz", Content::Binary),
+        seed(root, "v2.spz", Content::Binary),
+        seed(root, "payload.bin", Content::Binary),
+    ];
+    Target {
+        name: "spz",
+        dir,
+        seeds,
+        read: |dir, mutated| {
+            let path = if mutated.extension().is_some_and(|e| e == "bin") {
+                let raw = std::fs::read(mutated).map_err(|e| SceneError::io(mutated, e))?;
+                let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+                std::io::Write::write_all(&mut gz, &raw).unwrap();
+                let path = dir.join("payload.spz");
+                std::fs::write(&path, gz.finish().unwrap()).unwrap();
+                path
+            } else {
+                mutated.to_path_buf()
+            };
+            read_spz(&path).map(drop).map_err(|e| match e {
+                damage_twin::scene::spz::SpzError::File(e) => e,
+                other => SceneError::invalid(mutated, other.to_string()),
+            })
+        },
+    }
+}
+
 pub fn ply_points_target() -> Target {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path();
