@@ -40,6 +40,14 @@ impl RunFolder {
     /// after cleaning up what killed runs left there. Fails now, before any work, when the
     /// place is not writable.
     pub fn begin(target: &Path) -> Result<RunFolder, SceneError> {
+        // A link to a folder: the run replaces the folder it points at, not the link.
+        let resolved;
+        let target = if fs::symlink_metadata(target).is_ok_and(|m| m.file_type().is_symlink()) {
+            resolved = fs::canonicalize(target).map_err(|e| SceneError::io(target, e))?;
+            resolved.as_path()
+        } else {
+            target
+        };
         let name = target
             .file_name()
             .ok_or_else(|| SceneError::invalid(target, "not a folder name"))?
@@ -313,6 +321,27 @@ mod tests {
         );
         // Nothing but the target is left beside it.
         assert_eq!(list(tmp.path()).unwrap(), vec!["run".to_string()]);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_link_to_a_folder_replaces_the_folder_it_points_at() {
+        let tmp = tempfile::tempdir().unwrap();
+        let real = tmp.path().join("real");
+        fs::create_dir(&real).unwrap();
+        write(&real.join("model.ply"), "old");
+        let link = tmp.path().join("link");
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        let run = RunFolder::begin(&link).unwrap();
+        write(&run.path("model.ply"), "new");
+        run.commit().unwrap();
+        assert!(
+            fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+        assert_eq!(fs::read_to_string(real.join("model.ply")).unwrap(), "new");
     }
 
     #[test]
