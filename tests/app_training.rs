@@ -42,6 +42,7 @@ fn the_viewer_trains_a_small_building_live_and_obeys_pause_and_stop() {
             resolution_factor: 1,
             mode: TrainMode::Label,
             label_weight: 0.1,
+            budget: None,
         },
         ..Settings::default()
     };

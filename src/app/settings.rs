@@ -171,6 +171,7 @@ impl Settings {
         if ![1, 2, 4, 8].contains(&self.training.resolution_factor) {
             self.training.resolution_factor = 1;
         }
+        self.training.budget = self.training.budget.map(|n| n.clamp(1, 10_000_000));
         self.training.label_weight = clamp(
             self.training.label_weight,
             0.0,

@@ -4,6 +4,7 @@
 mod args;
 mod bench;
 mod bench_render;
+mod compact;
 mod demo;
 mod eval;
 mod export;
@@ -45,6 +46,8 @@ enum Command {
     /// Hierarchical refinement: select a twin's damage Gaussians, draw hull masks, refine them at
     /// high resolution with the rest frozen.
     Refine(refine::Args),
+    /// Prune a model to its most important Gaussians and fine-tune it briefly (JSON report).
+    Compact(compact::Args),
     /// Render one view of a model to a PNG.
     Render(render::Args),
     /// Write a model for other viewers as SPZ (compressed) or PLY, with its bytes per Gaussian.
@@ -81,6 +84,7 @@ pub fn main() -> ExitCode {
         Some(Command::Train(args)) => train::run(args),
         Some(Command::Eval(args)) => eval::run(args),
         Some(Command::Refine(args)) => refine::run(args),
+        Some(Command::Compact(args)) => compact::run(args),
         Some(Command::Render(args)) => render::run(args),
         Some(Command::Export(args)) => export::run(args),
         Some(Command::Report(args)) => report::run(args),

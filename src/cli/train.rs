@@ -40,6 +40,11 @@ pub struct Args {
     /// Cap on the Gaussian count (adaptive density control stops growing there).
     #[arg(long)]
     pub max_gaussians: Option<usize>,
+    /// Most Gaussians the model ends with: density control grows to twice this, the least
+    /// important (least blending weight over the training views) are pruned at the end of
+    /// densification, and training goes on. A count only (see `compact` for fractions).
+    #[arg(long, value_parser = super::compact::parse_train_budget)]
+    pub budget: Option<usize>,
     /// Learn each photo's exposure and white balance (a gain and offset per channel) with the
     /// model, so they are not baked into the Gaussians.
     #[arg(long)]
@@ -129,6 +134,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         random_points: args.run.init_points,
         eval_every: args.eval_every,
         max_gaussians: args.max_gaussians,
+        budget: args.budget,
         appearance: args
             .appearance
             .then(|| damage_twin::train::appearance::AppearanceConfig {

@@ -14,7 +14,7 @@ use crate::scene::{Dataset, ImageScale};
 use crate::splats::Splats;
 use crate::train::job::{JobContext, JobError, JobOptions};
 use crate::train::run::{TrainJob, TrainSetup, train_with};
-use crate::train::spec::{DensifyPolicy, TrainSpec, TrainView};
+use crate::train::spec::{DensifyPolicy, TrainSpec, TrainView, densify_for_budget};
 use crate::train::views::{Holdout, InitialModel, initial_splats, load_views, split_views};
 
 /// Random initial points of an interactive run when the dataset has none (3DGS uses 100k for
@@ -32,6 +32,8 @@ pub struct TrainingSettings {
     pub mode: TrainMode,
     /// Weight of the label BCE loss in label mode.
     pub label_weight: f32,
+    /// Most Gaussians the model may end with (`RunConfig::budget`; None: no budget).
+    pub budget: Option<usize>,
 }
 
 impl Default for TrainingSettings {
@@ -44,6 +46,7 @@ impl Default for TrainingSettings {
             resolution_factor: 4,
             mode: TrainMode::Label,
             label_weight: RunConfig::default().label_weight,
+            budget: None,
         }
     }
 }
@@ -71,6 +74,11 @@ pub struct RunConfig {
     pub eval_every: u32,
     /// Cap on the Gaussian count (None: adaptive density control as in 3DGS).
     pub max_gaussians: Option<usize>,
+    /// Most Gaussians the model ends with: density control may grow past it, then the least
+    /// important (least blending weight over the training views) are pruned at the end of
+    /// densification and training goes on (`train::spec::densify_for_budget`). Wins over
+    /// `max_gaussians`.
+    pub budget: Option<usize>,
     /// Learn each training photo's exposure and white balance (`train::appearance`).
     pub appearance: Option<crate::train::appearance::AppearanceConfig>,
 }
@@ -96,6 +104,7 @@ impl Default for RunConfig {
             random_points: 100_000,
             eval_every: 0,
             max_gaussians: None,
+            budget: None,
             appearance: None,
         }
     }
@@ -120,6 +129,7 @@ impl RunConfig {
             label_weight: settings.label_weight,
             random_points: INTERACTIVE_RANDOM_POINTS,
             eval_every: (settings.iterations / 10).max(1),
+            budget: settings.budget,
             ..RunConfig::default()
         }
     }
@@ -239,6 +249,9 @@ pub fn model_and_spec(
     spec.lr.raw_labels = config.label_lr;
     if let Some(max) = config.max_gaussians {
         spec.densify = DensifyPolicy::Budget { max };
+    }
+    if let Some(budget) = config.budget {
+        spec.densify = DensifyPolicy::Adaptive(densify_for_budget(spec.iterations, budget, 0));
     }
     Ok((splats, spec))
 }

@@ -1,6 +1,7 @@
 //! Reports: charts and tables of measured results, as files. Presentation only: every figure
 //! arrives computed; nothing here renders a model or trains.
 
+pub mod budget_chart;
 pub mod inspection;
 pub mod study_chart;
 pub mod tradeoff_chart;

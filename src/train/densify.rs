@@ -42,6 +42,10 @@ pub struct DensifyConfig {
     pub reset_opacity_at_start: bool,
     /// Cap on the Gaussian count: densify the highest gradients first until the cap.
     pub budget: Option<usize>,
+    /// When set, the trainer prunes the model to this many Gaussians by importance (blending
+    /// weight over the training views, `train::importance`) at the end of the densification
+    /// window, then trains on (`--budget`). The densifier itself never reads it.
+    pub prune_to: Option<usize>,
     pub seed: u64,
 }
 
@@ -61,6 +65,7 @@ impl Default for DensifyConfig {
             opacity_reset_value: 0.01,
             reset_opacity_at_start: false,
             budget: None,
+            prune_to: None,
             seed: 0,
         }
     }

@@ -8,6 +8,7 @@ pub mod densify;
 pub mod evaluate;
 pub mod guards;
 pub mod history;
+pub mod importance;
 pub mod job;
 pub mod loss;
 pub mod priority;

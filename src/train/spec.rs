@@ -118,6 +118,22 @@ pub fn densify_for_iterations(iterations: u32, seed: u64) -> DensifyConfig {
     }
 }
 
+/// How far density control may grow a `--budget` run above its budget before the importance
+/// prune at the end of densification cuts it back (Mini-Splatting's densify-then-simplify): the
+/// prune chooses among this many times the budget. 2 is a first choice, not a tuned one.
+pub const BUDGET_OVERSHOOT: f32 = 2.0;
+
+/// Density control for a run that must end with at most `budget` Gaussians: 3DGS density control
+/// fitted to the run and capped at `BUDGET_OVERSHOOT × budget` (highest gradients first), then an
+/// importance prune to `budget` at the end of densification (`DensifyConfig::prune_to`).
+pub fn densify_for_budget(iterations: u32, budget: usize, seed: u64) -> DensifyConfig {
+    DensifyConfig {
+        budget: Some((budget as f32 * BUDGET_OVERSHOOT).ceil() as usize),
+        prune_to: Some(budget),
+        ..densify_for_iterations(iterations, seed)
+    }
+}
+
 /// How the Gaussian set may change during a run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum DensifyPolicy {

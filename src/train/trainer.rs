@@ -18,6 +18,7 @@ use crate::train::appearance::AppearanceModel;
 use crate::train::densify::{Densifier, camera_extent};
 use crate::train::evaluate::{EvalScores, evaluate_with};
 use crate::train::guards::first_non_finite_param;
+use crate::train::importance::{importance, prune_to};
 use crate::train::loss::{LabelLossParams, LossWorkspace, label_loss, photometric_loss};
 use crate::train::scale_cap::ScaleCap;
 use crate::train::schedule::sh_degree_for_step;
@@ -522,6 +523,10 @@ impl Trainer {
             let report = densifier.after_step(step, &mut self.splats, &mut self.adam, self.extent);
             changed = report.densified || report.opacity_reset;
         }
+        if let Some(keep) = self.importance_prune_due(step) {
+            self.prune_by_importance(keep);
+            changed = true;
+        }
         self.timings.densify += t.elapsed().as_secs_f64();
 
         self.steps_done = step;
@@ -543,6 +548,26 @@ impl Trainer {
             step,
             loss,
             rolled_back: None,
+        }
+    }
+
+    /// The budget to prune to at `step`: the end of the densification window (or of the run,
+    /// when that comes first) of a spec with `DensifyConfig::prune_to`, if the model exceeds it.
+    fn importance_prune_due(&self, step: u32) -> Option<usize> {
+        let config = &self.densifier.as_ref()?.config;
+        let keep = config.prune_to?;
+        (step == config.stop.min(self.spec.iterations) && self.splats.len() > keep).then_some(keep)
+    }
+
+    /// Prunes to the `keep` Gaussians with the most blending weight over the training views,
+    /// keeping Adam and the density statistics in step.
+    fn prune_by_importance(&mut self, keep: usize) {
+        let settings = RenderSettings::new(self.spec.background, self.active_sh_degree());
+        let score = importance(&self.splats, &self.views, &settings);
+        let mask = prune_to(&mut self.splats, &score, keep);
+        self.adam.retain(&mask);
+        if let Some(densifier) = &mut self.densifier {
+            densifier.reset_stats(self.splats.len());
         }
     }
 

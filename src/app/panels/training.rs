@@ -1,5 +1,5 @@
-//! Training controls: start / pause / resume / stop, iterations, resolution scale, mode and label
-//! weight, and a progress bar with ETA. Reads the state, queues commands.
+//! Training controls: start / pause / resume / stop, iterations, resolution scale, Gaussian
+//! budget, mode and label weight, and a progress bar with ETA. Reads the state, queues commands.
 
 use crate::app::commands::Command;
 use crate::app::panels::edit_settings;
@@ -60,6 +60,21 @@ impl TrainingPanel {
                             for mode in TrainMode::ALL {
                                 ui.selectable_value(&mut t.mode, mode, mode.name());
                             }
+                        });
+                        ui.end_row();
+                        ui.label("Gaussian budget")
+                            .on_hover_text("Most Gaussians the model ends with (--budget)");
+                        ui.horizontal(|ui| {
+                            let mut on = t.budget.is_some();
+                            ui.checkbox(&mut on, "");
+                            let mut n = t.budget.unwrap_or(50_000);
+                            ui.add_enabled(
+                                on,
+                                egui::DragValue::new(&mut n)
+                                    .range(1..=10_000_000)
+                                    .speed(100),
+                            );
+                            t.budget = on.then_some(n);
                         });
                         ui.end_row();
                         if t.mode == TrainMode::Label {

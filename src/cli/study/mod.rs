@@ -1,6 +1,7 @@
 //! `damage-twin study …`: measurements that answer an inspector's questions with numbers, each
 //! writing JSON, CSV, a Markdown table and a chart. One file per study.
 
+mod budget;
 mod hierarchy;
 mod mask_noise;
 
@@ -12,12 +13,16 @@ pub enum Study {
     /// The hierarchy's efficiency: full high-resolution training against a coarse twin, coarse +
     /// fine-tune and coarse + retrain, in wall time and held-out accuracy.
     Hierarchy(hierarchy::HierarchyArgs),
+    /// The Gaussian budget: a full run against `train --budget` at fractions of its count and
+    /// `compact` of its model, in held-out PSNR, Gaussians, bytes and seconds.
+    Budget(budget::BudgetArgs),
 }
 
 pub fn run(study: Study) -> anyhow::Result<()> {
     match study {
         Study::MaskNoise(args) => mask_noise::run(args),
         Study::Hierarchy(args) => hierarchy::run(args),
+        Study::Budget(args) => budget::run(args),
     }
 }
 
