@@ -10,7 +10,6 @@ pub mod evaluate;
 pub mod hierarchy;
 pub mod hulls;
 pub mod layer;
-pub mod lift;
 pub mod measure;
 pub mod mode;
 pub mod overlay;

@@ -6,8 +6,8 @@
 
 use glam::{Vec2, Vec3};
 
-use crate::damage::lift::WeightLift;
 use crate::raster::RenderSettings;
+use crate::raster::weight_lift::WeightLift;
 use crate::scene::{Camera, Intrinsics, Mask};
 use crate::splats::Splats;
 use crate::splats::model::state::{DELETED, HIDDEN};

@@ -9,9 +9,9 @@ use std::time::Instant;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use serde::Serialize;
 
-use crate::damage::lift::WeightLift;
 use crate::damage::{DamageClass, Palette, TrainMode};
 use crate::raster::RenderSettings;
+use crate::raster::weight_lift::WeightLift;
 use crate::scene::{Camera, Mask};
 use crate::splats::Splats;
 use crate::splats::model::{SH_C0, sigmoid};

@@ -19,6 +19,7 @@ mod reference_backward;
 mod segments;
 #[cfg(test)]
 mod tests;
+pub mod weight_lift;
 
 use std::time::{Duration, Instant};
 

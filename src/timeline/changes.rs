@@ -13,8 +13,8 @@ use serde::Serialize;
 
 use crate::damage::DamageClass;
 use crate::damage::evaluate::{DamageReadout, LABEL_THRESHOLD, predicted_masks_at};
-use crate::damage::lift::WeightLift;
 use crate::metrics::MaskAgreement;
+use crate::raster::weight_lift::WeightLift;
 use crate::raster::{RenderSettings, render};
 use crate::scene::{Camera, Dataset, ImageScale, Mask, SceneError};
 use crate::splats::Splats;

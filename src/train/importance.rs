@@ -2,12 +2,12 @@
 //! training images it draws (Mini-Splatting's and LightGaussian's "global significance"), and
 //! pruning a model to its `keep` most important Gaussians (`prune_to`).
 //!
-//! No renderer of its own: the sums come from `damage::lift::WeightLift`, the same exact-backward
-//! accumulation that lifts damage masks to Gaussians, with a weight of 1 on every pixel the view
-//! trains (its loss region when it has one).
+//! No renderer of its own: the sums come from `raster::weight_lift::WeightLift`, the same
+//! exact-backward accumulation that lifts damage masks to Gaussians, with a weight of 1 on every
+//! pixel the view trains (its loss region when it has one).
 
-use crate::damage::lift::WeightLift;
 use crate::raster::RenderSettings;
+use crate::raster::weight_lift::WeightLift;
 use crate::splats::Splats;
 use crate::train::spec::TrainView;
 

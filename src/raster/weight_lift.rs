@@ -1,7 +1,7 @@
 //! Each Gaussian's blending weight over chosen pixels of a view, `Σ_p w_p · α_ip T_ip`: how much
 //! of those pixels it draws. The closed-form 2D→3D lift of FlashSplat (accumulate the weight over
 //! damage and non-damage mask pixels, keep the majority) and each Gaussian's visibility in a view
-//! both come from it.
+//! both come from it, and so does each Gaussian's importance for a budget (`train::importance`).
 //!
 //! No kernel of its own: a label channel `D = Σ_i l_i α_i T_i` has `∂D/∂l_i = α_i T_i`, so the
 //! rasterizer's exact backward with `v_labels = w` (and no colour gradient) leaves
