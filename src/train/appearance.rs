@@ -84,6 +84,35 @@ impl AppearanceModel {
         (Vec3::new(p[0], p[1], p[2]), Vec3::new(p[3], p[4], p[5]))
     }
 
+    /// Pins the transforms' mean to the identity and returns the mean that was taken out, per
+    /// channel `(gain, offset)`, for the caller to fold into the Gaussians' colours
+    /// (`fold_into_colours`): `g_v ⊙ c + o_v = g'_v ⊙ (ḡ ⊙ c + ō) + o'_v` with `g'_v = g_v / ḡ`,
+    /// `o'_v = o_v − g'_v ⊙ ō`, so every photo's render is unchanged. Without it the transforms
+    /// and the Gaussians share a free overall gain and offset, which the weak prior does not
+    /// hold: the transforms drift together and the Gaussians' own colours end away from every
+    /// photo's light (docs/ROBUSTNESS.md).
+    pub fn recentre(&mut self) -> (Vec3, Vec3) {
+        let n = self.views.len().max(1) as f32;
+        let mut gain = [0.0f32; 3];
+        let mut offset = [0.0f32; 3];
+        for t in &self.views {
+            for k in 0..3 {
+                gain[k] += t.params[k] / n;
+                offset[k] += t.params[3 + k] / n;
+            }
+        }
+        if !gain.iter().chain(&offset).all(|v| v.is_finite()) || gain.iter().any(|&g| g <= 0.05) {
+            return (Vec3::ONE, Vec3::ZERO);
+        }
+        for t in &mut self.views {
+            for k in 0..3 {
+                t.params[k] /= gain[k];
+                t.params[3 + k] -= t.params[k] * offset[k];
+            }
+        }
+        (Vec3::from(gain), Vec3::from(offset))
+    }
+
     /// Every view's light as the timeline's colour transform (the same per-channel model the
     /// timeline fits between surveys), `photo ≈ transform(render)`.
     pub fn transforms(&self) -> Vec<ColourTransform> {
@@ -150,9 +179,65 @@ impl AppearanceModel {
     }
 }
 
+/// Replaces every Gaussian's colour `c` by `gain ⊙ c + offset`: the colour is `0.5 + Σ_k Y_k c_k`
+/// (before its clamp at 0), so the DC coefficient takes the offset and every coefficient the gain.
+pub fn fold_into_colours(splats: &mut crate::splats::Splats, gain: Vec3, offset: Vec3) {
+    use crate::splats::model::SH_C0;
+    let coeffs = splats.sh_coeffs();
+    let (gain, offset) = (gain.to_array(), offset.to_array());
+    for gaussian in splats.sh.chunks_exact_mut(coeffs * 3) {
+        for (k, coefficient) in gaussian.chunks_exact_mut(3).enumerate() {
+            for c in 0..3 {
+                coefficient[c] *= gain[c];
+                if k == 0 {
+                    coefficient[c] += (0.5 * gain[c] + offset[c] - 0.5) / SH_C0;
+                }
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn recentring_keeps_every_photos_render_and_pins_the_mean() {
+        use crate::splats::Splats;
+        use glam::Quat;
+        let mut model = AppearanceModel::new(2, AppearanceConfig::default());
+        model.views[0].params = [0.8, 0.9, 1.1, 0.05, -0.02, 0.0];
+        model.views[1].params = [0.6, 0.7, 0.9, 0.01, 0.03, 0.04];
+        let mut splats = Splats::empty(1, 0);
+        let sh: Vec<f32> = (0..12).map(|i| 0.05 * i as f32 - 0.2).collect();
+        splats.push(Vec3::ZERO, Vec3::ZERO, Quat::IDENTITY, 0.0, &sh, &[], 1, 0);
+        // A colour from the SH at one direction: 0.5 + Σ Y_k c_k per channel.
+        let colour = |splats: &Splats| {
+            let mut basis = [0.0f32; 16];
+            crate::splats::sh::sh_basis(1, Vec3::new(0.3, -0.4, 0.87).normalize(), &mut basis);
+            Vec3::from_array(std::array::from_fn(|c| {
+                0.5 + (0..4).map(|k| basis[k] * splats.sh[k * 3 + c]).sum::<f32>()
+            }))
+        };
+        let lit = |model: &AppearanceModel, view: usize, c: Vec3| {
+            let (g, o) = model.transform(view);
+            g * c + o
+        };
+        let before = [0, 1].map(|v| lit(&model, v, colour(&splats)));
+        let (gain, offset) = model.recentre();
+        fold_into_colours(&mut splats, gain, offset);
+        for (v, before) in before.iter().enumerate() {
+            let after = lit(&model, v, colour(&splats));
+            assert!(
+                (after - *before).abs().max_element() < 1e-5,
+                "{after} {before}"
+            );
+        }
+        let (g0, o0) = model.transform(0);
+        let (g1, o1) = model.transform(1);
+        assert!(((g0 + g1) / 2.0 - Vec3::ONE).abs().max_element() < 1e-6);
+        assert!(((o0 + o1) / 2.0).abs().max_element() < 1e-6);
+    }
 
     #[test]
     fn a_darker_photo_is_explained_by_its_transform() {

@@ -115,6 +115,10 @@ struct Checkpoint {
     densifier: Option<Densifier>,
 }
 
+/// Steps between pinning the photos' mean light to the identity (`AppearanceModel::recentre`):
+/// the drift it removes is slow, and each pin rescales every SH coefficient.
+const APPEARANCE_RECENTRE_EVERY: u32 = 100;
+
 /// One training run in progress.
 pub struct Trainer {
     spec: TrainSpec,
@@ -525,6 +529,14 @@ impl Trainer {
         }
         if let Some(keep) = self.importance_prune_due(step) {
             self.prune_by_importance(keep);
+            changed = true;
+        }
+        if let Some(appearance) = &mut self.appearance
+            && step.is_multiple_of(APPEARANCE_RECENTRE_EVERY)
+        {
+            let (gain, offset) = appearance.recentre();
+            crate::train::appearance::fold_into_colours(&mut self.splats, gain, offset);
+            // The next checkpoint holds the folded colours, which go with the recentred light.
             changed = true;
         }
         self.timings.densify += t.elapsed().as_secs_f64();
