@@ -93,7 +93,7 @@ fn half_appearance_psnr(
         let mut lit = damage_twin::scene::RgbImage {
             width: out.width,
             height: out.height,
-            data: out.color.clone(),
+            data: out.color,
         };
         light.apply(&mut lit);
         let right: Vec<u8> = (0..w * view.image.height as usize)

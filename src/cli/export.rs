@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 
 use damage_twin::damage::layer::{DamageLayer, display_splats};
-use damage_twin::scene::ply::{splat_header, standard_properties, write_splats};
+use damage_twin::scene::ply::{splats_file_bytes, write_splats};
 use damage_twin::scene::spz::{SpzOptions, SpzVersion, write_spz};
 use damage_twin::splats::Splats;
 use damage_twin::splats::model::state::{DELETED, HIDDEN, SELECTED};
@@ -122,7 +122,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if format == Format::Ply {
         println!("{bytes} bytes, {} per Gaussian", per_gaussian(bytes, n));
     } else {
-        let ply = ply_bytes(&splats);
+        let ply = splats_file_bytes(&splats);
         println!(
             "{bytes} bytes, {} per Gaussian; as PLY {ply} bytes, {} per Gaussian (from the PLY \
              layout); {:.2}x smaller than PLY",
@@ -182,15 +182,6 @@ fn parse_sh_bits(text: &str) -> Result<[u8; 2], String> {
 fn extension(path: &Path) -> Option<String> {
     path.extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
-}
-
-/// The size of `splats` as `write_splats` lays it out, computed from its header and row layout
-/// (every listed property an f32, then `float survey`, `double id`, `float damage_survey`,
-/// `uchar state`) rather than written; `tests/spz_export.rs` checks it against a written file.
-fn ply_bytes(splats: &Splats) -> u64 {
-    let floats = standard_properties(splats.sh_degree).len() + splats.label_channels + 2;
-    let row = 4 * floats + 8 + 1;
-    splat_header(splats).len() as u64 + (splats.len() * row) as u64
 }
 
 fn per_gaussian(bytes: u64, n: usize) -> String {

@@ -2,7 +2,6 @@
 //! damage (`damage::refine`). Writes `model.ply`, `selection.json`, `hulls/<view>.png`,
 //! `metrics.json` and a before/after render of one held-out view with the damage layer.
 
-use damage_twin::scene::run_folder::RunFolder;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -17,6 +16,7 @@ use damage_twin::damage::refine::{RefineConfig, RefineOutcome, Strategy, refine_
 use damage_twin::damage::select::{SelectConfig, Validation};
 use damage_twin::damage::{DamageClass, Palette, TrainMode};
 use damage_twin::scene::atomic::write_atomic;
+use damage_twin::scene::run_folder::RunFolder;
 use damage_twin::scene::{Dataset, ImageScale, RgbImage};
 use damage_twin::train::job::JobOptions;
 
@@ -156,8 +156,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         JobOptions::headless(args.threads),
     );
     let outcome = drive(job, "refinement", args.quiet, |_| {})?;
-    let staging = outputs.path("");
-    write_outputs(&staging, &dataset, &model, &outcome, args.scale, palette)?;
+    write_outputs(
+        outputs.staging(),
+        &dataset,
+        &model,
+        &outcome,
+        args.scale,
+        palette,
+    )?;
     outputs
         .commit()
         .with_context(|| format!("replacing {}", args.out.display()))?;

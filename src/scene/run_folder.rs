@@ -78,6 +78,11 @@ impl RunFolder {
         self.staging.join(name)
     }
 
+    /// The staging folder itself, for writers that take a folder.
+    pub fn staging(&self) -> &Path {
+        &self.staging
+    }
+
     /// The folder the run's files end up in.
     pub fn target(&self) -> &Path {
         &self.target

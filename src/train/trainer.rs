@@ -339,7 +339,6 @@ impl Trainer {
         )
     }
 
-    /// The trained model, with the input's frozen flags restored.
     /// Each training view's learnt light (empty when the spec learns none).
     pub fn appearance(&self) -> Vec<crate::scene::project::ColourTransform> {
         self.appearance
@@ -348,6 +347,7 @@ impl Trainer {
             .unwrap_or_default()
     }
 
+    /// The trained model, with the input's frozen flags restored.
     pub fn into_splats(mut self) -> Splats {
         if let Some(saved) = &self.input_frozen {
             for (frozen, id) in self
@@ -532,6 +532,7 @@ impl Trainer {
             changed = true;
         }
         if let Some(appearance) = &mut self.appearance
+            && appearance.active_at(step)
             && step.is_multiple_of(APPEARANCE_RECENTRE_EVERY)
         {
             let (gain, offset) = appearance.recentre();

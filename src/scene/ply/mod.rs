@@ -50,4 +50,6 @@ mod points;
 mod splats;
 
 pub use points::{read_point_cloud, read_point_cloud_skipping, write_point_cloud};
-pub use splats::{label_property, read_splats, splat_header, standard_properties, write_splats};
+pub use splats::{
+    label_property, read_splats, splat_header, splats_file_bytes, standard_properties, write_splats,
+};

@@ -59,6 +59,14 @@ pub fn splat_header(splats: &Splats) -> String {
     header
 }
 
+/// The bytes `write_splats` writes for `splats`, from its header and row layout (every property
+/// a 4-byte float but `double id` and `uchar state`), without writing them.
+pub fn splats_file_bytes(splats: &Splats) -> u64 {
+    let floats = standard_properties(splats.sh_degree).len() + splats.label_channels + 2;
+    let row = 4 * floats + 8 + 1;
+    splat_header(splats).len() as u64 + (splats.len() * row) as u64
+}
+
 /// Writes `splats` as a binary little-endian 3DGS PLY (atomically: temp file, fsync, rename).
 pub fn write_splats(path: &Path, splats: &Splats) -> Result<(), SceneError> {
     splats
