@@ -144,7 +144,13 @@ fn overlay_mode_paints_the_targets_and_reads_the_colours_back() {
     let plain = prepare_run(dataset, &config(TrainMode::Rgb, 1)).expect("prepares");
     let labelled = prepare_run(dataset, &config(TrainMode::Label, 1)).expect("prepares");
     assert_eq!(overlay.setup.splats.label_channels, 0);
-    let red = Palette::default().unit_colour(DamageClass::Crack);
+    // The colours are chosen against the photos and travel with the model.
+    let chosen = overlay
+        .setup
+        .splats
+        .overlay
+        .expect("overlay colours with the model");
+    let red = Palette::from_overlay(&chosen).unit_colour(DamageClass::Crack);
     let mut painted = 0;
     for ((o, p), l) in overlay
         .setup

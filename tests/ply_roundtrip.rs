@@ -7,6 +7,7 @@ use std::path::Path;
 use damage_twin::scene::PointCloud;
 use damage_twin::scene::ply::{read_point_cloud, read_splats, write_point_cloud, write_splats};
 use damage_twin::splats::Splats;
+use damage_twin::splats::model::OverlayColours;
 use glam::{Quat, Vec3};
 
 /// Deterministic pseudo-random splats with awkward values (negative zero, subnormals, huge).
@@ -61,6 +62,7 @@ fn assert_bitwise_equal(a: &Splats, b: &Splats) {
     assert_eq!(bits(&a.sh), bits(&b.sh));
     assert_eq!(bits(&a.raw_labels), bits(&b.raw_labels));
     assert_eq!(a.meta, b.meta);
+    assert_eq!(a.overlay, b.overlay);
 }
 
 #[test]
@@ -93,6 +95,33 @@ fn empty_model_round_trips() {
     let original = Splats::empty(3, 3);
     write_splats(&path, &original).unwrap();
     assert_bitwise_equal(&original, &read_splats(&path).unwrap());
+}
+
+#[test]
+fn overlay_colours_travel_in_a_header_comment_and_bad_ones_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("overlay.ply");
+    let mut original = splats(1, 0, 5, 3);
+    original.overlay = Some(OverlayColours {
+        colours: [[0, 0, 255], [0, 255, 0], [255, 0, 255]],
+        tolerance: 87.5,
+    });
+    write_splats(&path, &original).unwrap();
+    assert!(header_of(&path).contains(
+        "comment damage_twin overlay_colours 0,0,255 0,255,0 255,0,255 tolerance 87.5\n"
+    ));
+    assert_bitwise_equal(&original, &read_splats(&path).unwrap());
+    // Our comment with a bad colour names the file and the comment; other comments are fine.
+    let mut bytes = std::fs::read(&path).unwrap();
+    let at = bytes.windows(8).position(|w| w == b"0,255,0 ").unwrap();
+    bytes[at + 4] = b'6'; // 0,256,0: not a byte
+    let bad_path = dir.path().join("bad.ply");
+    std::fs::write(&bad_path, &bytes).unwrap();
+    let err = read_splats(&bad_path).unwrap_err().to_string();
+    assert!(
+        err.contains("bad.ply") && err.contains("overlay_colours"),
+        "{err}"
+    );
 }
 
 fn header_of(path: &Path) -> String {

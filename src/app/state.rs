@@ -568,8 +568,9 @@ impl AppState {
             return;
         }
         self.history.clear();
-        // Overlay training paints the masks in the damage layer's colours, so what the layer
-        // shows and what the twin learns agree.
+        // The damage layer's colours are the palette of a run that does not choose its own;
+        // overlay training chooses colours against the photos (RunConfig::contrasting_palette)
+        // and saves them with the model, whose damage is read back in them.
         let palette = crate::damage::Palette {
             colours: self.settings.damage.colours,
         };

@@ -61,10 +61,13 @@ impl HoldoutArgs {
     }
 }
 
+/// `--colour quakecity`: DESIGN.md's class colours, not colours chosen against the photos.
+pub const FIXED_PALETTE: &str = "quakecity";
+
 /// The palette with the user's `--colour class=r,g,b` overrides.
 pub fn palette(overrides: &[String]) -> anyhow::Result<Palette> {
     let mut palette = Palette::default();
-    for text in overrides {
+    for text in overrides.iter().filter(|t| *t != FIXED_PALETTE) {
         palette.set_from_text(text).map_err(anyhow::Error::msg)?;
     }
     Ok(palette)

@@ -10,7 +10,7 @@ use serde::Serialize;
 
 use damage_twin::damage::TrainMode;
 use damage_twin::damage::assess::{EvalRequest, ViewScore, evaluate_job};
-use damage_twin::damage::evaluate::{DamageFigures, DamageReadout};
+use damage_twin::damage::evaluate::{DamageFigures, DamageReadout, OverlaySource};
 use damage_twin::scene::ImageScale;
 use damage_twin::train::job::JobOptions;
 use damage_twin::train::views::split_views;
@@ -38,12 +38,18 @@ pub struct Args {
     /// default: label when the model has label channels, else overlay.
     #[arg(long)]
     pub mode: Option<TrainMode>,
-    /// Class colour override for overlay mode, class=r,g,b (repeatable).
+    /// Class colour override for overlay mode, class=r,g,b (repeatable), for a model that does
+    /// not carry its colours (older files); a model's own colours win.
     #[arg(long = "colour")]
     pub colours: Vec<String>,
-    /// Overlay mode: colour distance (8-bit RGB) within which a pixel is a class colour.
-    #[arg(long, default_value_t = damage_twin::damage::overlay::OVERLAY_TOLERANCE)]
-    pub tolerance: f32,
+    /// Overlay mode: colour distance (8-bit RGB) within which a colour is a class colour
+    /// (default: the model's saved tolerance, else 40).
+    #[arg(long)]
+    pub tolerance: Option<f32>,
+    /// Overlay mode: read the class colours from the Gaussians' base colours (gaussians) or
+    /// from the rendered pixels (pixels, as the published method does).
+    #[arg(long, default_value = "gaussians")]
+    pub overlay_readout: OverlaySource,
     /// Also score each held-out photo's right half after fitting its light (a gain and offset
     /// per channel) to the render on its left half: the NeRF-W protocol for a model whose
     /// training photos differ in exposure.
@@ -110,7 +116,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (_, test_idx) =
         split_views(&dataset, &args.holdout.holdout()).map_err(anyhow::Error::msg)?;
     let mut readout = DamageReadout::for_model(&splats, palette(&args.colours)?);
-    readout.tolerance = args.tolerance;
+    if let Some(tolerance) = args.tolerance {
+        readout.tolerance = tolerance;
+    }
+    readout.overlay_source = args.overlay_readout;
     if let Some(mode) = args.mode {
         readout.mode = mode;
     }

@@ -121,15 +121,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("preparing output folder {}", args.out.display()))?;
     std::fs::create_dir_all(outputs.path("hulls"))
         .with_context(|| format!("creating {}", args.out.join("hulls").display()))?;
-    let palette = palette(&args.colours)?;
-    let mode = args
-        .mode
-        .unwrap_or_else(|| DamageReadout::for_model(&model, palette).mode);
+    // An overlay model's own colours (saved with it) win over --colour.
+    let readout = DamageReadout::for_model(&model, palette(&args.colours)?);
+    let palette = readout.palette;
+    let mode = args.mode.unwrap_or(readout.mode);
     let config = RefineConfig {
         select: SelectConfig {
             classes: parse_classes(&args.classes)?,
             mode,
             palette,
+            colour_tolerance: readout.tolerance,
             validation: args.validation,
             min_neighbours: args.min_neighbours,
             ..SelectConfig::default()

@@ -63,7 +63,9 @@ pub struct Args {
     /// Weight of the label loss beside the photometric loss (label mode).
     #[arg(long, default_value_t = RunConfig::default().label_weight)]
     pub label_weight: f32,
-    /// Class colour override for overlay mode, class=r,g,b (repeatable), e.g. crack=0,0,255.
+    /// Overlay mode's class colours. Without this flag they are chosen to contrast with the
+    /// photos (and saved in model.ply); `quakecity` keeps DESIGN.md's colours, and class=r,g,b
+    /// (repeatable, e.g. crack=0,0,255) overrides one of those.
     #[arg(long = "colour")]
     pub colours: Vec<String>,
     /// Weight of damage pixels in the label cross-entropy (label mode).
@@ -135,6 +137,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         eval_every: args.eval_every,
         max_gaussians: args.max_gaussians,
         budget: args.budget,
+        contrasting_palette: args.colours.is_empty(),
         appearance: args
             .appearance
             .then(|| damage_twin::train::appearance::AppearanceConfig {

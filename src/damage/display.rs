@@ -113,8 +113,9 @@ pub fn render_still(splats: &Splats, request: &RenderRequest) -> Result<Rendered
     render_png(&request.out, splats, &request.camera, &request.style)?;
     let mut masks = Vec::new();
     if let Some(readout) = &request.masks {
+        let (splats, readout) = readout.prepare(splats);
         let out = render(
-            splats,
+            &splats,
             &request.camera,
             &RenderSettings::new(request.style.background, splats.sh_degree),
         );
@@ -123,7 +124,7 @@ pub fn render_still(splats: &Splats, request: &RenderRequest) -> Result<Rendered
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "render".into());
-        for (&class, mask) in DamageClass::ALL.iter().zip(predicted_masks(&out, readout)) {
+        for (&class, mask) in DamageClass::ALL.iter().zip(predicted_masks(&out, &readout)) {
             let path = request.out.with_file_name(format!("{stem}_{class}.png"));
             save_mask_png(&path, &mask)?;
             masks.push(WrittenMask {

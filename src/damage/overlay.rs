@@ -4,6 +4,8 @@
 
 use crate::damage::{DamageClass, Palette};
 use crate::scene::{Mask, RgbImage};
+use crate::splats::Splats;
+use crate::splats::model::SH_C0;
 
 /// Default distance (8-bit RGB units) within which a rendered colour counts as a class colour:
 /// the same tolerance the colour-coded mask reader uses.
@@ -62,6 +64,87 @@ pub fn detect_overlay(
     masks
 }
 
+/// The distance (8-bit RGB units) of Gaussian `g`'s base colour (the view-independent SH DC
+/// term) to `colour`.
+pub fn base_colour_distance(splats: &Splats, g: usize, colour: [u8; 3]) -> f32 {
+    let sh = splats.sh_of(g);
+    let mut d2 = 0.0;
+    for c in 0..3 {
+        let value = (SH_C0 * sh[c] + 0.5).clamp(0.0, 1.0) * 255.0;
+        let diff = value - f32::from(colour[c]);
+        d2 += diff * diff;
+    }
+    d2.sqrt()
+}
+
+/// The overlay-mode class of each Gaussian read from its base colour: the nearest class colour
+/// within `tolerance` (8-bit RGB units), else none.
+pub fn gaussian_classes(
+    splats: &Splats,
+    palette: &Palette,
+    tolerance: f32,
+) -> Vec<Option<DamageClass>> {
+    (0..splats.len())
+        .map(|g| {
+            DamageClass::ALL
+                .iter()
+                .map(|&class| {
+                    (
+                        class,
+                        base_colour_distance(splats, g, palette.colour(class)),
+                    )
+                })
+                .filter(|&(_, d)| d <= tolerance)
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(class, _)| class)
+        })
+        .collect()
+}
+
+/// Exposed rebar is seen where the cover concrete has spalled, and one colour per pixel cannot
+/// say both: where overlay mode reads rebar it reads spalling too. (At 240×135 a fifth of the
+/// demo building's spalled pixels are rebar pixels as well: docs/DAMAGE.md.) Masks in
+/// `DamageClass::ALL` order.
+pub fn nest_rebar_in_spalling(masks: &mut [Mask]) {
+    let (s, r) = (
+        DamageClass::Spalling.channel(),
+        DamageClass::Rebar.channel(),
+    );
+    if masks.len() > s.max(r) && masks[s].data.len() == masks[r].data.len() {
+        let rebar = masks[r].data.clone();
+        for (spall, rebar) in masks[s].data.iter_mut().zip(rebar) {
+            *spall |= rebar;
+        }
+    }
+}
+
+/// A copy of an overlay-mode twin whose label channels say each Gaussian's class as read from
+/// its base colour (`gaussian_classes`; a rebar Gaussian is spalling too, as in
+/// `nest_rebar_in_spalling`): rendered, they give damage masks that blend by opacity like the
+/// colours did, but that a view-dependent tint and a blended edge cannot push out of
+/// tolerance. Logits of ±`CERTAIN_LOGIT` stand for "is" and "is not".
+pub fn labels_from_colours(splats: &Splats, palette: &Palette, tolerance: f32) -> Splats {
+    const CERTAIN_LOGIT: f32 = 20.0;
+    let classes = gaussian_classes(splats, palette, tolerance);
+    let channels = DamageClass::ALL.len();
+    let mut out = splats.clone();
+    out.label_channels = channels;
+    out.raw_labels = classes
+        .iter()
+        .flat_map(|class| {
+            DamageClass::ALL.map(|c| {
+                let nested = c == DamageClass::Spalling && *class == Some(DamageClass::Rebar);
+                if *class == Some(c) || nested {
+                    CERTAIN_LOGIT
+                } else {
+                    -CERTAIN_LOGIT
+                }
+            })
+        })
+        .collect();
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -94,5 +177,45 @@ mod tests {
         let far = [0.5, 0.5, 0.5, f32::NAN, 0.0, 0.0];
         let none = detect_overlay(&far, 2, 1, &palette, OVERLAY_TOLERANCE);
         assert!(none.iter().all(|m| m.data.iter().all(|&v| v == 0)));
+    }
+
+    #[test]
+    fn gaussians_read_their_class_from_the_base_colour_and_rebar_is_spalling_too() {
+        use glam::{Quat, Vec3};
+        let palette = Palette::default();
+        let mut splats = Splats::empty(0, 0);
+        // Base colour → SH DC: colour = SH_C0 · dc + 0.5.
+        let dc = |rgb: [f32; 3]| rgb.map(|v| (v - 0.5) / SH_C0);
+        let colours = [
+            palette.unit_colour(DamageClass::Crack),
+            palette.unit_colour(DamageClass::Rebar).map(|v| v * 0.9), // 25 off: within 40
+            [0.5, 0.5, 0.5],
+        ];
+        for (g, rgb) in colours.iter().enumerate() {
+            splats.push(
+                Vec3::ZERO,
+                Vec3::ZERO,
+                Quat::IDENTITY,
+                0.0,
+                &dc(*rgb),
+                &[],
+                g as u64,
+                0,
+            );
+        }
+        let classes = gaussian_classes(&splats, &palette, OVERLAY_TOLERANCE);
+        assert_eq!(
+            classes,
+            vec![Some(DamageClass::Crack), Some(DamageClass::Rebar), None]
+        );
+        let labelled = labels_from_colours(&splats, &palette, OVERLAY_TOLERANCE);
+        assert_eq!(labelled.label_channels, 3);
+        let on =
+            |g: usize| -> Vec<bool> { labelled.labels_of(g).iter().map(|&l| l > 0.0).collect() };
+        assert_eq!(on(0), vec![true, false, false]);
+        assert_eq!(on(1), vec![false, true, true]); // spalling and rebar
+        assert_eq!(on(2), vec![false, false, false]);
+        // A tolerance that excludes the tinted rebar leaves it unclassified.
+        assert_eq!(gaussian_classes(&splats, &palette, 10.0)[1], None);
     }
 }

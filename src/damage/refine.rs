@@ -15,7 +15,6 @@ use serde::Serialize;
 use crate::damage::TrainMode;
 use crate::damage::evaluate::{DamageReadout, evaluate_damage};
 use crate::damage::hulls::{Hull, HullConfig, union_mask, view_hulls};
-use crate::damage::overlay::OVERLAY_TOLERANCE;
 use crate::damage::reference::{load_reference_views, reference_source};
 use crate::damage::refine_selection::{given_selection, region_labels, select_by_masks};
 use crate::damage::select::{SelectConfig, Selection};
@@ -383,8 +382,7 @@ pub fn refine(
     let t = Instant::now();
     let readout = DamageReadout {
         mode,
-        palette: config.select.palette,
-        tolerance: OVERLAY_TOLERANCE,
+        ..DamageReadout::for_model(model, config.select.palette)
     };
     let heldout: Vec<&ViewHulls> = views.iter().filter(|v| v.heldout).collect();
     let before = quality(dataset, model, &heldout, config, &readout)?;

@@ -9,12 +9,13 @@ use std::time::Instant;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use serde::Serialize;
 
+use crate::damage::overlay::base_colour_distance;
 use crate::damage::{DamageClass, Palette, TrainMode};
 use crate::raster::RenderSettings;
 use crate::raster::weight_lift::WeightLift;
 use crate::scene::{Camera, Mask};
 use crate::splats::Splats;
-use crate::splats::model::{SH_C0, sigmoid};
+use crate::splats::model::sigmoid;
 
 /// How candidates are checked against the views' masks.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, serde::Deserialize)]
@@ -122,18 +123,6 @@ impl Selection {
     }
 }
 
-/// The class colour distance of a Gaussian's base colour (view-independent SH DC), 8-bit units.
-fn colour_distance(splats: &Splats, g: usize, colour: [u8; 3]) -> f32 {
-    let sh = splats.sh_of(g);
-    let mut d2 = 0.0;
-    for c in 0..3 {
-        let value = (SH_C0 * sh[c] + 0.5).clamp(0.0, 1.0) * 255.0;
-        let diff = value - f32::from(colour[c]);
-        d2 += diff * diff;
-    }
-    d2.sqrt()
-}
-
 /// The candidate class of Gaussian `g`, if any: the most probable (label mode) or the nearest
 /// colour (overlay mode) among the configured classes that passes the filter.
 fn candidate_class(splats: &Splats, g: usize, config: &SelectConfig) -> Option<DamageClass> {
@@ -145,7 +134,7 @@ fn candidate_class(splats: &Splats, g: usize, config: &SelectConfig) -> Option<D
                 (p >= config.label_threshold).then_some(p)
             }
             TrainMode::Overlay => {
-                let d = colour_distance(splats, g, config.palette.colour(class));
+                let d = base_colour_distance(splats, g, config.palette.colour(class));
                 // A smaller distance is a better score.
                 (d <= config.colour_tolerance).then_some(-d)
             }
@@ -317,6 +306,7 @@ mod tests {
     use super::*;
     use crate::raster::render;
     use crate::scene::Intrinsics;
+    use crate::splats::model::SH_C0;
     use glam::{Quat, Vec2, Vec3};
 
     /// A wall of Gaussians at z = 0 seen by cameras in front of it; the ones in the square

@@ -8,10 +8,11 @@ use std::sync::Arc;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use crate::damage::overlay::paint_overlay;
+use crate::damage::overlay::{OVERLAY_TOLERANCE, paint_overlay};
 use crate::damage::{DamageClass, Palette, TrainMode};
-use crate::scene::{Dataset, ImageScale};
+use crate::scene::{Dataset, ImageScale, RgbImage};
 use crate::splats::Splats;
+use crate::splats::model::OverlayColours;
 use crate::train::job::{JobContext, JobError, JobOptions};
 use crate::train::run::{TrainJob, TrainSetup, train_with};
 use crate::train::spec::{DensifyPolicy, TrainSpec, TrainView, densify_for_budget};
@@ -81,6 +82,9 @@ pub struct RunConfig {
     pub budget: Option<usize>,
     /// Learn each training photo's exposure and white balance (`train::appearance`).
     pub appearance: Option<crate::train::appearance::AppearanceConfig>,
+    /// Overlay mode: paint the damage in colours chosen against the training photos
+    /// (`Palette::contrasting`) instead of `palette`.
+    pub contrasting_palette: bool,
 }
 
 impl Default for RunConfig {
@@ -106,6 +110,9 @@ impl Default for RunConfig {
             max_gaussians: None,
             budget: None,
             appearance: None,
+            // docs/DAMAGE.md: the default pink of spalling is within 70 of the demo's sunlit
+            // plaster, so a tolerance that keeps blended edges reads the walls as spalling.
+            contrasting_palette: true,
         }
     }
 }
@@ -188,10 +195,25 @@ pub fn prepare_run(dataset: &Dataset, config: &RunConfig) -> Result<PreparedRun,
     let labels = mode.uses_masks();
     let mut views = load_views(dataset, &train_indices, config.scale, labels)?;
     let mut heldout = load_views(dataset, &heldout_indices, config.scale, labels)?;
-    apply_mode(&mut views, mode, &config.palette);
-    apply_mode(&mut heldout, mode, &config.palette);
+    let overlay = overlay_colours(&views, config, mode);
+    if let Some(o) = &overlay {
+        let rgb = |c: [u8; 3]| format!("{},{},{}", c[0], c[1], c[2]);
+        notes.push(format!(
+            "overlay colours: crack {}, spalling {}, rebar {}; read back within {:.0}",
+            rgb(o.colours[0]),
+            rgb(o.colours[1]),
+            rgb(o.colours[2]),
+            o.tolerance
+        ));
+    }
+    let palette = overlay
+        .as_ref()
+        .map_or(config.palette, Palette::from_overlay);
+    apply_mode(&mut views, mode, &palette);
+    apply_mode(&mut heldout, mode, &palette);
 
-    let (splats, spec) = model_and_spec(dataset, &views, config, mode)?;
+    let (mut splats, spec) = model_and_spec(dataset, &views, config, mode)?;
+    splats.overlay = overlay;
     notes.push(format!(
         "{} training and {} held-out views at {}×{}, {} initial Gaussians, {mode} mode",
         views.len(),
@@ -254,6 +276,28 @@ pub fn model_and_spec(
         spec.densify = DensifyPolicy::Adaptive(densify_for_budget(spec.iterations, budget, 0));
     }
     Ok((splats, spec))
+}
+
+/// The colours an overlay-mode run paints its damage in (None in other modes): chosen against
+/// the training photos (`views`, before painting) when `config.contrasting_palette`, else
+/// `config.palette` with the readout's default tolerance. They are saved with the model.
+pub fn overlay_colours(
+    views: &[TrainView],
+    config: &RunConfig,
+    mode: TrainMode,
+) -> Option<OverlayColours> {
+    if mode != TrainMode::Overlay {
+        return None;
+    }
+    Some(if config.contrasting_palette {
+        let photos: Vec<&RgbImage> = views.iter().map(|v| &v.image).collect();
+        Palette::contrasting(&photos)
+    } else {
+        OverlayColours {
+            colours: config.palette.colours,
+            tolerance: OVERLAY_TOLERANCE,
+        }
+    })
 }
 
 /// Turns views loaded with their label masks into the targets of `mode`: overlay paints the

@@ -15,10 +15,9 @@ use serde::Serialize;
 use crate::damage::evaluate::{
     DamageReadout, DamageScores, ReferenceView, evaluate_damage, predicted_masks,
 };
-use crate::damage::overlay::OVERLAY_TOLERANCE;
 use crate::damage::reference::{ReferenceSource, load_reference_views, reference_source};
-use crate::damage::setup::{RunConfig, apply_mode, model_and_spec};
-use crate::damage::{DamageClass, TrainMode};
+use crate::damage::setup::{RunConfig, apply_mode, model_and_spec, overlay_colours};
+use crate::damage::{DamageClass, Palette, TrainMode};
 use crate::metrics::MaskAgreement;
 use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
 use crate::scene::masks::resize_mask_nearest;
@@ -184,13 +183,18 @@ pub fn run_study(
             for (view, masks) in views.iter_mut().zip(&corrupted) {
                 view.labels = masks.clone();
             }
-            apply_mode(&mut views, mode, &config.run.palette);
             let run_config = RunConfig {
                 mode,
                 ..config.run.clone()
             };
-            let (splats, spec) =
+            let overlay = overlay_colours(&views, &run_config, mode);
+            let palette = overlay
+                .as_ref()
+                .map_or(config.run.palette, Palette::from_overlay);
+            apply_mode(&mut views, mode, &palette);
+            let (mut splats, spec) =
                 model_and_spec(dataset, &views, &run_config, mode).map_err(|e| e.to_string())?;
+            splats.overlay = overlay;
             let job = train(
                 TrainSetup {
                     spec,
@@ -215,8 +219,7 @@ pub fn run_study(
                 .map_err(|e| format!("{mode} mode at rate {rate}: {e}"))?;
             let readout = DamageReadout {
                 mode,
-                tolerance: OVERLAY_TOLERANCE,
-                palette: config.run.palette,
+                ..DamageReadout::for_model(&outcome.splats, config.run.palette)
             };
             let training = score_training_views(
                 &outcome.splats,
@@ -382,6 +385,8 @@ fn score_training_views(
     background: glam::Vec3,
 ) -> TrainingScores {
     let settings = RenderSettings::new(background, splats.sh_degree);
+    let (splats, readout) = readout.prepare(splats);
+    let readout = &readout;
     let mut rasterizer = Rasterizer::new();
     let mut out = RenderOutput::default();
     let mut scores = TrainingScores {
@@ -391,7 +396,7 @@ fn score_training_views(
         introduced: [(0, 0); 3],
     };
     for (i, view) in clean.reference.iter().enumerate() {
-        rasterizer.forward(splats, &view.camera, &settings, &mut out);
+        rasterizer.forward(&splats, &view.camera, &settings, &mut out);
         let predicted = predicted_masks(&out, readout);
         scores.all.add_view(&predicted, &view.reference);
         if noisy[i] {

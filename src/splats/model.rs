@@ -68,7 +68,66 @@ pub struct Splats {
     pub raw_labels: Vec<f32>,
     pub label_channels: usize,
     pub meta: SplatMeta,
+    /// The class colours of an overlay-mode model (None for other models): what its painted
+    /// damage means, saved with it so that reading the damage back needs no flags.
+    pub overlay: Option<OverlayColours>,
 }
+
+/// The colours an overlay-mode model was trained to paint its damage in, one per damage class
+/// (in class-channel order: crack, spalling, rebar), and the distance (8-bit RGB units) within
+/// which a Gaussian's base colour reads as a class colour.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OverlayColours {
+    pub colours: [[u8; 3]; 3],
+    pub tolerance: f32,
+}
+
+impl OverlayColours {
+    /// The PLY header comment's text after `comment `: `damage_twin overlay_colours r,g,b r,g,b
+    /// r,g,b tolerance T`.
+    pub fn to_comment(&self) -> String {
+        let rgb = |c: [u8; 3]| format!("{},{},{}", c[0], c[1], c[2]);
+        format!(
+            "{OVERLAY_COMMENT} {} {} {} tolerance {}",
+            rgb(self.colours[0]),
+            rgb(self.colours[1]),
+            rgb(self.colours[2]),
+            self.tolerance
+        )
+    }
+
+    /// Parses `to_comment`'s text; None when `text` is another comment, an error when it is
+    /// ours but malformed.
+    pub fn from_comment(text: &str) -> Option<Result<OverlayColours, String>> {
+        let rest = text.strip_prefix(OVERLAY_COMMENT)?;
+        let bad = || format!("malformed `{OVERLAY_COMMENT}` comment {text:?}");
+        let parse = || -> Option<OverlayColours> {
+            let words: Vec<&str> = rest.split_ascii_whitespace().collect();
+            let [a, b, c, "tolerance", t] = words[..] else {
+                return None;
+            };
+            let rgb = |w: &str| -> Option<[u8; 3]> {
+                let v: Vec<u8> = w
+                    .split(',')
+                    .map(|x| x.parse().ok())
+                    .collect::<Option<_>>()?;
+                v.try_into().ok()
+            };
+            let tolerance: f32 = t
+                .parse()
+                .ok()
+                .filter(|t: &f32| t.is_finite() && *t >= 0.0)?;
+            Some(OverlayColours {
+                colours: [rgb(a)?, rgb(b)?, rgb(c)?],
+                tolerance,
+            })
+        };
+        Some(parse().ok_or_else(bad))
+    }
+}
+
+/// How the overlay colours' PLY header comment starts.
+const OVERLAY_COMMENT: &str = "damage_twin overlay_colours";
 
 /// Most damage label channels a model may carry: the one limit every layer shares (the PLY
 /// reader refuses more; the CPU rasterizer's per-tile scratch, the trainer's loss and the GPU

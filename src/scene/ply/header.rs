@@ -139,6 +139,8 @@ impl Element {
 pub struct Header {
     pub encoding: Encoding,
     pub elements: Vec<Element>,
+    /// The `comment` lines' text, in order.
+    pub comments: Vec<String>,
     /// Bytes of header text, `end_header` line included: where the data starts.
     pub data_offset: u64,
 }
@@ -192,11 +194,19 @@ pub fn read_header(reader: &mut impl BufRead, path: &Path) -> Result<Header, Sce
     }
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
+    let mut comments = Vec::new();
     loop {
         let line = header_line(reader, path, &mut consumed)?;
         let words: Vec<&str> = line.split_ascii_whitespace().collect();
         match words.as_slice() {
-            [] | ["comment", ..] | ["obj_info", ..] => {}
+            ["comment", ..] => comments.push(
+                line.trim_start()
+                    .strip_prefix("comment")
+                    .unwrap_or_default()
+                    .trim()
+                    .to_string(),
+            ),
+            [] | ["obj_info", ..] => {}
             ["end_header"] => break,
             ["format", format, version] => {
                 if *version != "1.0" {
@@ -254,6 +264,7 @@ pub fn read_header(reader: &mut impl BufRead, path: &Path) -> Result<Header, Sce
     Ok(Header {
         encoding,
         elements,
+        comments,
         data_offset: consumed as u64,
     })
 }

@@ -11,7 +11,7 @@ use super::header::RowReader;
 use crate::scene::DamageClass;
 use crate::scene::SceneError;
 use crate::scene::atomic::write_atomic;
-use crate::splats::model::{NO_SURVEY, sh_coeffs_for_degree};
+use crate::splats::model::{NO_SURVEY, OverlayColours, sh_coeffs_for_degree};
 use crate::splats::{MAX_LABEL_CHANNELS, Splats};
 
 /// Largest id stored exactly in the `double id` property (2^53).
@@ -37,15 +37,17 @@ pub fn standard_properties(sh_degree: u32) -> Vec<String> {
     names
 }
 
-/// The header damage-twin writes: the 3DGS header (all `float`), then `label_*` floats when the
+/// The header damage-twin writes: an overlay-mode model's class colours as a comment
+/// (`OverlayColours::to_comment`), the 3DGS header (all `float`), then `label_*` floats when the
 /// model has label channels, then `float survey`, `double id`, `float damage_survey` (the
 /// survey a Gaussian was first seen as damage, 65535 for never) and `uchar state` (DESIGN.md's
 /// selection and edit bits).
 pub fn splat_header(splats: &Splats) -> String {
-    let mut header = format!(
-        "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
-        splats.len()
-    );
+    let mut header = String::from("ply\nformat binary_little_endian 1.0\n");
+    if let Some(overlay) = &splats.overlay {
+        header.push_str(&format!("comment {}\n", overlay.to_comment()));
+    }
+    header.push_str(&format!("element vertex {}\n", splats.len()));
     for name in standard_properties(splats.sh_degree) {
         header.push_str(&format!("property float {name}\n"));
     }
@@ -186,6 +188,11 @@ pub fn read_splats(path: &Path) -> Result<Splats, SceneError> {
     let n = rows.count;
     let k = sh_coeffs_for_degree(sh_degree);
     let mut splats = Splats::empty(sh_degree, label_props.len());
+    for comment in &header.comments {
+        if let Some(overlay) = OverlayColours::from_comment(comment) {
+            splats.overlay = Some(overlay.map_err(bad)?);
+        }
+    }
     splats.means.reserve_exact(n);
     splats.log_scales.reserve_exact(n);
     splats.rotations.reserve_exact(n);
