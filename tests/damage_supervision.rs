@@ -259,3 +259,39 @@ fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks
         assert!((0.0..0.2).contains(&r.errors_introduced), "{r:?}");
     }
 }
+
+#[test]
+fn the_stability_suite_perturbs_only_the_training_views_and_scores_the_same_heldout_views() {
+    use damage_twin::damage::stability::{Perturbation, stability_run};
+    let dataset = survey();
+    let base = config(TrainMode::Label, 150);
+    let plain =
+        stability_run(dataset, &base, Perturbation::None, "baseline", 0.0, None).expect("baseline");
+    let noise = Perturbation::PoseNoise {
+        degrees: 10.0,
+        seed: 1,
+    };
+    let noisy = stability_run(dataset, &base, noise, "pose_noise", 10.0, None).expect("noisy");
+    eprintln!("baseline {plain:?}\npose noise 10°: {noisy:?}");
+    assert_eq!((noisy.axis.as_str(), noisy.value), ("pose_noise", 10.0));
+    assert_eq!((noisy.width, noisy.height), (240, 135));
+    assert!(plain.iou.contains_key("crack") && plain.ssim.is_some());
+    // Training photos that no longer line up blur the twin: the held-out views, posed exactly,
+    // see it.
+    assert!(
+        noisy.psnr < plain.psnr - 1.0,
+        "{} vs {}",
+        noisy.psnr,
+        plain.psnr
+    );
+    let err = stability_run(
+        dataset,
+        &base,
+        Perturbation::Views(1000),
+        "views",
+        1000.0,
+        None,
+    )
+    .expect_err("more views than the survey has");
+    assert!(err.contains("1000 training views"), "{err}");
+}

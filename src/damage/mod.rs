@@ -20,6 +20,7 @@ pub mod refine;
 mod refine_selection;
 pub mod select;
 pub mod setup;
+pub mod stability;
 
 // The classes live beneath `scene` (mask folders and PLY properties are named by them).
 pub use crate::scene::damage_class::{DamageClass, NEW_DAMAGE_COLOUR};

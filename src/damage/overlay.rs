@@ -1,6 +1,7 @@
 //! Overlay mode (the published method): damage masks painted into the photos in the class
-//! colours become the photometric target; afterwards a rendered pixel is read back as damage when
-//! its colour is close to a class colour.
+//! colours become the photometric target. Afterwards damage is read back where a colour is close
+//! to a class colour: each Gaussian's base colour (`labels_from_colours`, the default) or each
+//! rendered pixel (`detect_overlay`, as the paper reads its renders).
 
 use crate::damage::{DamageClass, Palette};
 use crate::scene::{Mask, RgbImage};

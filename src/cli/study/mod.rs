@@ -4,6 +4,7 @@
 mod budget;
 mod hierarchy;
 mod mask_noise;
+mod stability;
 
 #[derive(clap::Subcommand, Debug)]
 pub enum Study {
@@ -16,6 +17,9 @@ pub enum Study {
     /// The Gaussian budget: a full run against `train --budget` at fractions of its count and
     /// `compact` of its model, in held-out PSNR, Gaussians, bytes and seconds.
     Budget(budget::BudgetArgs),
+    /// Where the twin holds and where it breaks: fewer views, pose noise, training scale, a
+    /// textureless building and mask noise, each moved alone from a baseline run.
+    Stability(stability::StabilityArgs),
 }
 
 pub fn run(study: Study) -> anyhow::Result<()> {
@@ -23,6 +27,7 @@ pub fn run(study: Study) -> anyhow::Result<()> {
         Study::MaskNoise(args) => mask_noise::run(args),
         Study::Hierarchy(args) => hierarchy::run(args),
         Study::Budget(args) => budget::run(args),
+        Study::Stability(args) => stability::run(args),
     }
 }
 
