@@ -261,37 +261,48 @@ fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks
 }
 
 #[test]
-fn the_stability_suite_perturbs_only_the_training_views_and_scores_the_same_heldout_views() {
-    use damage_twin::damage::stability::{Perturbation, stability_run};
+fn the_stability_suite_perturbs_only_the_training_views_and_scores_the_held_out_ones() {
+    use damage_twin::damage::stability::{Perturbation, perturb, stability_run};
     let dataset = survey();
-    let base = config(TrainMode::Label, 150);
-    let plain =
-        stability_run(dataset, &base, Perturbation::None, "baseline", 0.0, None).expect("baseline");
+    let base = config(TrainMode::Label, 60);
+    let run = prepare_run(dataset, &base).expect("prepares");
+    let training = run.setup.views.clone();
+
+    let mut few = training.clone();
+    perturb(&mut few, Perturbation::Views(5)).expect("five views");
+    let names: Vec<&str> = few.iter().map(|v| v.name.as_str()).collect();
+    let spread: Vec<&str> = [0, 4, 8, 12, 16]
+        .iter()
+        .map(|&i| training[i].name.as_str())
+        .collect();
+    assert_eq!((training.len(), names), (21, spread));
+    let err = perturb(&mut few, Perturbation::Views(1000)).expect_err("too many");
+    assert!(err.contains("1000 training views"), "{err}");
+
+    let mut noisy = training.clone();
     let noise = Perturbation::PoseNoise {
-        degrees: 10.0,
+        degrees: 2.0,
         seed: 1,
     };
-    let noisy = stability_run(dataset, &base, noise, "pose_noise", 10.0, None).expect("noisy");
-    eprintln!("baseline {plain:?}\npose noise 10°: {noisy:?}");
-    assert_eq!((noisy.axis.as_str(), noisy.value), ("pose_noise", 10.0));
-    assert_eq!((noisy.width, noisy.height), (240, 135));
-    assert!(plain.iou.contains_key("crack") && plain.ssim.is_some());
-    // Training photos that no longer line up blur the twin: the held-out views, posed exactly,
-    // see it.
-    assert!(
-        noisy.psnr < plain.psnr - 1.0,
-        "{} vs {}",
-        noisy.psnr,
-        plain.psnr
+    perturb(&mut noisy, noise).expect("noise");
+    for (before, after) in training.iter().zip(&noisy) {
+        let turned = before.camera.rotation.angle_between(after.camera.rotation);
+        assert!(
+            (turned.to_degrees() - 2.0).abs() < 0.01,
+            "{}",
+            turned.to_degrees()
+        );
+        assert!(before.camera.position().distance(after.camera.position()) > 0.0);
+        assert_eq!(before.image, after.image);
+    }
+
+    // A row scores the held-out views, posed exactly, at the training size.
+    let row = stability_run(dataset, &base, noise, "pose_noise", 2.0, None).expect("trains");
+    assert_eq!((row.axis.as_str(), row.value), ("pose_noise", 2.0));
+    assert_eq!((row.width, row.height), (240, 135));
+    assert!(row.psnr.is_finite() && row.ssim.is_some());
+    assert_eq!(
+        row.iou.keys().collect::<Vec<_>>(),
+        ["crack", "rebar", "spalling"]
     );
-    let err = stability_run(
-        dataset,
-        &base,
-        Perturbation::Views(1000),
-        "views",
-        1000.0,
-        None,
-    )
-    .expect_err("more views than the survey has");
-    assert!(err.contains("1000 training views"), "{err}");
 }

@@ -7,6 +7,13 @@ use crate::damage::{DamageClass, Palette};
 use crate::scene::{Mask, RgbImage};
 use crate::splats::Splats;
 use crate::splats::model::SH_C0;
+use crate::train::spec::TrainView;
+
+/// A Gaussian starts in a class colour when at least this fraction of the views its centre
+/// projects into paint that class there. About half the views of a facade see it, the others
+/// look through the building at another wall, so a majority would miss most damage; damage
+/// covers a few percent of a photo, so chance agreement stays far below.
+const SEED_VOTE_FRACTION: f32 = 0.25;
 
 /// Default distance (8-bit RGB units) within which a rendered colour counts as a class colour:
 /// the same tolerance the colour-coded mask reader uses.
@@ -27,6 +34,52 @@ pub fn paint_overlay(image: &mut RgbImage, masks: &[Mask], palette: &Palette) {
             }
         }
     }
+}
+
+/// Starts the Gaussians that lie on painted damage in their class colour (SH DC; the other bands
+/// are left). `views` still carry their masks (`DamageClass::ALL` order; painted in that order,
+/// so the last class set at a pixel is its colour). Initial colours come from the unpainted
+/// photos, and at the SH DC learning rate a wall-grey Gaussian needs most of a 3,000-step run
+/// to become saturated green (docs/DAMAGE.md); seeded, the painted damage is there from the
+/// start. Returns how many Gaussians were seeded.
+pub fn seed_class_colours(splats: &mut Splats, views: &[TrainView], palette: &Palette) -> usize {
+    let coeffs = splats.sh_coeffs() * 3;
+    let mut seeded = 0;
+    for g in 0..splats.len() {
+        let mean = splats.means[g];
+        let mut seen = 0u32;
+        let mut votes = [0u32; 3];
+        for view in views {
+            let Some((x, y)) = view.camera.pixel_of(mean) else {
+                continue;
+            };
+            seen += 1;
+            let p = (y * view.image.width + x) as usize;
+            let painted = DamageClass::ALL
+                .iter()
+                .zip(&view.labels)
+                .filter(|(_, mask)| mask.data.get(p).is_some_and(|&m| m != 0))
+                .map(|(class, _)| class.channel())
+                .last();
+            if let Some(k) = painted {
+                votes[k] += 1;
+            }
+        }
+        let (best, &count) = votes
+            .iter()
+            .enumerate()
+            .max_by_key(|&(_, v)| *v)
+            .unwrap_or((0, &0));
+        if seen > 0 && count as f32 >= SEED_VOTE_FRACTION * seen as f32 {
+            let colour = palette.unit_colour(DamageClass::ALL[best]);
+            let sh = &mut splats.sh[g * coeffs..g * coeffs + 3];
+            for (c, value) in sh.iter_mut().zip(colour) {
+                *c = (value - 0.5) / SH_C0;
+            }
+            seeded += 1;
+        }
+    }
+    seeded
 }
 
 /// Reads per-class masks back from an overlay-mode render (`color`: RGB interleaved in [0, 1],
@@ -218,5 +271,72 @@ mod tests {
         assert_eq!(on(2), vec![false, false, false]);
         // A tolerance that excludes the tinted rebar leaves it unclassified.
         assert_eq!(gaussian_classes(&splats, &palette, 10.0)[1], None);
+    }
+
+    #[test]
+    fn gaussians_on_painted_damage_start_in_its_colour() {
+        use crate::scene::{Camera, Intrinsics};
+        use glam::{Quat, Vec3};
+        let intrinsics = Intrinsics {
+            width: 9,
+            height: 9,
+            fx: 9.0,
+            fy: 9.0,
+            cx: 4.5,
+            cy: 4.5,
+        };
+        // Four views of the origin; the origin lands on pixel (4, 4) in each.
+        let views: Vec<TrainView> = (0..4)
+            .map(|i| {
+                let angle = i as f32 * 0.3;
+                let eye = Vec3::new(angle.sin(), 0.0, -angle.cos()) * 5.0;
+                let camera = Camera::look_at(intrinsics, eye, Vec3::ZERO, Vec3::NEG_Y);
+                let mut labels = vec![Mask::empty(9, 9), Mask::empty(9, 9), Mask::empty(9, 9)];
+                if i == 0 {
+                    labels[DamageClass::Spalling.channel()].data[4 * 9 + 4] = 1;
+                }
+                TrainView {
+                    name: format!("v{i}"),
+                    camera,
+                    image: RgbImage {
+                        width: 9,
+                        height: 9,
+                        data: vec![0.5; 243],
+                    },
+                    labels,
+                    region: None,
+                }
+            })
+            .collect();
+        assert_eq!(views[2].camera.pixel_of(Vec3::ZERO), Some((4, 4)));
+        let palette = Palette::default();
+        let mut splats = Splats::empty(1, 0);
+        let grey = [0.0; 12];
+        for (g, mean) in [Vec3::ZERO, Vec3::new(0.0, 0.3, 0.0)]
+            .into_iter()
+            .enumerate()
+        {
+            splats.push(
+                mean,
+                Vec3::ZERO,
+                Quat::IDENTITY,
+                0.0,
+                &grey,
+                &[],
+                g as u64,
+                0,
+            );
+        }
+        // One view of four paints spalling at the origin: a quarter, enough.
+        let seeded = seed_class_colours(&mut splats, &views, &palette);
+        assert_eq!(seeded, 1);
+        let expected = palette.unit_colour(DamageClass::Spalling);
+        for c in 0..3 {
+            let colour = SH_C0 * splats.sh_of(0)[c] + 0.5;
+            assert!((colour - expected[c]).abs() < 1e-5);
+        }
+        // The higher band and the undamaged Gaussian are left alone.
+        assert!(splats.sh_of(0)[3..].iter().all(|&v| v == 0.0));
+        assert!(splats.sh_of(1).iter().all(|&v| v == 0.0));
     }
 }

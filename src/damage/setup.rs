@@ -8,7 +8,7 @@ use std::sync::Arc;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use crate::damage::overlay::{OVERLAY_TOLERANCE, paint_overlay};
+use crate::damage::overlay::{OVERLAY_TOLERANCE, paint_overlay, seed_class_colours};
 use crate::damage::{DamageClass, Palette, TrainMode};
 use crate::scene::{Dataset, ImageScale, RgbImage};
 use crate::splats::Splats;
@@ -206,14 +206,17 @@ pub fn prepare_run(dataset: &Dataset, config: &RunConfig) -> Result<PreparedRun,
             o.tolerance
         ));
     }
+    // The initial model needs only the views' cameras; overlay mode seeds its colours from the
+    // masks before they are painted in.
+    let (mut splats, spec) = model_and_spec(dataset, &views, config, mode)?;
     let palette = overlay
         .as_ref()
         .map_or(config.palette, Palette::from_overlay);
-    apply_mode(&mut views, mode, &palette);
+    let seeded = prepare_targets(&mut views, &mut splats, mode, overlay, &palette);
     apply_mode(&mut heldout, mode, &palette);
-
-    let (mut splats, spec) = model_and_spec(dataset, &views, config, mode)?;
-    splats.overlay = overlay;
+    if mode == TrainMode::Overlay {
+        notes.push(format!("{seeded} Gaussians start in a class colour"));
+    }
     notes.push(format!(
         "{} training and {} held-out views at {}×{}, {} initial Gaussians, {mode} mode",
         views.len(),
@@ -298,6 +301,27 @@ pub fn overlay_colours(
             tolerance: OVERLAY_TOLERANCE,
         }
     })
+}
+
+/// Turns training views loaded with their label masks into the targets of `mode` for `splats`,
+/// the run's initial model: in overlay mode its Gaussians on painted damage start in their
+/// class colour (`seed_class_colours`) and it carries `overlay`, then the masks are painted in
+/// (`apply_mode`). Returns how many Gaussians were seeded.
+pub fn prepare_targets(
+    views: &mut [TrainView],
+    splats: &mut Splats,
+    mode: TrainMode,
+    overlay: Option<OverlayColours>,
+    palette: &Palette,
+) -> usize {
+    let seeded = if mode == TrainMode::Overlay {
+        seed_class_colours(splats, views, palette)
+    } else {
+        0
+    };
+    splats.overlay = overlay;
+    apply_mode(views, mode, palette);
+    seeded
 }
 
 /// Turns views loaded with their label masks into the targets of `mode`: overlay paints the

@@ -16,6 +16,7 @@ use crate::damage::{Palette, TrainMode};
 use crate::scene::{Camera, Dataset};
 use crate::train::job::JobOptions;
 use crate::train::run::train;
+use crate::train::spec::TrainView;
 
 /// One row of the study.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -66,26 +67,8 @@ pub fn stability_run(
 ) -> Result<StabilityRow, String> {
     let name = |e: String| format!("{axis} = {value}: {e}");
     let mut run = prepare_run(dataset, config).map_err(|e| name(e.to_string()))?;
-    let views = &mut run.setup.views;
-    match perturbation {
-        Perturbation::None => {}
-        Perturbation::Views(n) => {
-            if n == 0 || n > views.len() {
-                return Err(name(format!(
-                    "{n} training views asked for, {} available",
-                    views.len()
-                )));
-            }
-            *views = spread(std::mem::take(views), n);
-        }
-        Perturbation::PoseNoise { degrees, seed } => {
-            let centre = scene_centre(views.iter().map(|v| &v.camera));
-            let mut rng = fastrand::Rng::with_seed(seed);
-            for view in views.iter_mut() {
-                view.camera = perturb_pose(&view.camera, centre, degrees, &mut rng);
-            }
-        }
-    }
+    perturb(&mut run.setup.views, perturbation).map_err(name)?;
+    let views = &run.setup.views;
     let (width, height) = (views[0].image.width, views[0].image.height);
     let heldout_indices = run.heldout_indices.clone();
     run.setup.heldout.clear(); // scored below, once, not during training
@@ -124,6 +107,30 @@ pub fn stability_run(
         width,
         height,
     })
+}
+
+/// Applies `perturbation` to a run's training views.
+pub fn perturb(views: &mut Vec<TrainView>, perturbation: Perturbation) -> Result<(), String> {
+    match perturbation {
+        Perturbation::None => {}
+        Perturbation::Views(n) => {
+            if n == 0 || n > views.len() {
+                return Err(format!(
+                    "{n} training views asked for, {} available",
+                    views.len()
+                ));
+            }
+            *views = spread(std::mem::take(views), n);
+        }
+        Perturbation::PoseNoise { degrees, seed } => {
+            let centre = scene_centre(views.iter().map(|v| &v.camera));
+            let mut rng = fastrand::Rng::with_seed(seed);
+            for view in views.iter_mut() {
+                view.camera = perturb_pose(&view.camera, centre, degrees, &mut rng);
+            }
+        }
+    }
+    Ok(())
 }
 
 /// `n` of `items`, evenly spread (the first always kept).

@@ -16,7 +16,9 @@ use crate::damage::evaluate::{
     DamageReadout, DamageScores, ReferenceView, evaluate_damage, predicted_masks,
 };
 use crate::damage::reference::{ReferenceSource, load_reference_views, reference_source};
-use crate::damage::setup::{RunConfig, apply_mode, model_and_spec, overlay_colours};
+use crate::damage::setup::{
+    RunConfig, apply_mode, model_and_spec, overlay_colours, prepare_targets,
+};
 use crate::damage::{DamageClass, Palette, TrainMode};
 use crate::metrics::MaskAgreement;
 use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
@@ -191,10 +193,9 @@ pub fn run_study(
             let palette = overlay
                 .as_ref()
                 .map_or(config.run.palette, Palette::from_overlay);
-            apply_mode(&mut views, mode, &palette);
             let (mut splats, spec) =
                 model_and_spec(dataset, &views, &run_config, mode).map_err(|e| e.to_string())?;
-            splats.overlay = overlay;
+            prepare_targets(&mut views, &mut splats, mode, overlay, &palette);
             let job = train(
                 TrainSetup {
                     spec,
@@ -437,7 +438,12 @@ fn heldout_psnr(
     splats: &crate::splats::Splats,
 ) -> Option<f64> {
     let mut views = load_views(dataset, indices, config.scale, true).ok()?;
-    apply_mode(&mut views, config.mode, &config.palette);
+    // Overlay targets in the colours the model was painted in.
+    let palette = splats
+        .overlay
+        .as_ref()
+        .map_or(config.palette, Palette::from_overlay);
+    apply_mode(&mut views, config.mode, &palette);
     crate::train::evaluate::evaluate_views(splats, &views, config.background, splats.sh_degree)
         .map(|s| s.psnr)
 }
