@@ -58,9 +58,9 @@ pub fn seed_class_colours(splats: &mut Splats, views: &[TrainView], palette: &Pa
             let painted = DamageClass::ALL
                 .iter()
                 .zip(&view.labels)
-                .filter(|(_, mask)| mask.data.get(p).is_some_and(|&m| m != 0))
-                .map(|(class, _)| class.channel())
-                .last();
+                .rev()
+                .find(|(_, mask)| mask.data.get(p).is_some_and(|&m| m != 0))
+                .map(|(class, _)| class.channel());
             if let Some(k) = painted {
                 votes[k] += 1;
             }
@@ -331,9 +331,8 @@ mod tests {
         let seeded = seed_class_colours(&mut splats, &views, &palette);
         assert_eq!(seeded, 1);
         let expected = palette.unit_colour(DamageClass::Spalling);
-        for c in 0..3 {
-            let colour = SH_C0 * splats.sh_of(0)[c] + 0.5;
-            assert!((colour - expected[c]).abs() < 1e-5);
+        for (dc, want) in splats.sh_of(0)[..3].iter().zip(expected) {
+            assert!((SH_C0 * dc + 0.5 - want).abs() < 1e-5);
         }
         // The higher band and the undamaged Gaussian are left alone.
         assert!(splats.sh_of(0)[3..].iter().all(|&v| v == 0.0));

@@ -35,24 +35,36 @@ fn label(value: f64) -> String {
     }
 }
 
+/// How one panel is labelled.
+struct Panel<'a> {
+    caption: String,
+    x_desc: &'a str,
+    y_desc: &'a str,
+    y_range: std::ops::Range<f64>,
+    legend: bool,
+}
+
 /// One panel: `series` of (name, colour, y per row) against the rows' settings, as categories.
 fn draw_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    caption: &str,
-    x_desc: &str,
-    y_desc: &str,
+    panel: Panel,
     rows: &[&StabilityRow],
-    y_range: std::ops::Range<f64>,
     series: &[(&str, RGBColor, Vec<f64>)],
-    legend: bool,
 ) -> DrawResult
 where
     DB::ErrorType: 'static,
 {
+    let Panel {
+        caption,
+        x_desc,
+        y_desc,
+        y_range,
+        legend,
+    } = panel;
     let n = rows.len().max(1);
     let labels: Vec<String> = rows.iter().map(|r| label(r.value)).collect();
     let mut chart = ChartBuilder::on(area)
-        .caption(caption, ("sans-serif", 16))
+        .caption(&caption, ("sans-serif", 16))
         .margin(10)
         .x_label_area_size(34)
         .y_label_area_size(46)
@@ -124,16 +136,14 @@ where
             RGBColor(30, 30, 30),
             of_axis.iter().map(|r| r.psnr).collect(),
         )];
-        draw_panel(
-            &panels[column],
-            &format!("{axis}: held-out PSNR"),
+        let top = Panel {
+            caption: format!("{axis}: held-out PSNR"),
             x_desc,
-            "PSNR (dB)",
-            &of_axis,
-            psnr_range.clone(),
-            &psnr,
-            false,
-        )?;
+            y_desc: "PSNR (dB)",
+            y_range: psnr_range.clone(),
+            legend: false,
+        };
+        draw_panel(&panels[column], top, &of_axis, &psnr)?;
         let iou: Vec<(&str, RGBColor, Vec<f64>)> = CLASSES
             .iter()
             .map(|(class, colour)| {
@@ -144,17 +154,15 @@ where
                 (*class, *colour, ys)
             })
             .collect();
-        draw_panel(
-            &panels[axes.len() + column],
-            &format!("{axis}: held-out IoU"),
+        let bottom = Panel {
+            caption: format!("{axis}: held-out IoU"),
             x_desc,
-            "IoU",
-            &of_axis,
-            0.0..1.0,
-            &iou,
+            y_desc: "IoU",
+            y_range: 0.0..1.0,
             // One legend, in the first column, so it hides no other panel's points.
-            column == 0,
-        )?;
+            legend: column == 0,
+        };
+        draw_panel(&panels[axes.len() + column], bottom, &of_axis, &iou)?;
     }
     root.present()?;
     Ok(())
