@@ -123,6 +123,12 @@ pub fn run(args: StabilityArgs) -> anyhow::Result<()> {
     }
     let started = Instant::now();
     let dataset = open_dataset(&args.dataset, glam::Vec3::ZERO)?;
+    // Read before any training, so a dataset that cannot be regenerated fails now.
+    let synth_params = if args.no_textureless {
+        None
+    } else {
+        Some(synth_params(&args.dataset)?)
+    };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
@@ -205,12 +211,12 @@ pub fn run(args: StabilityArgs) -> anyhow::Result<()> {
             f64::from(factor),
         )?);
     }
-    if !args.no_textureless {
+    if let Some(params) = &synth_params {
         let first = &dataset.views[0].camera.intrinsics;
         let (width, height) = args.scale.apply(first.width, first.height);
         for (flat, name) in [(false, "textured"), (true, "flat")] {
             let root = regenerate(
-                &args.dataset,
+                params,
                 &args.out.join("data").join(name),
                 width,
                 height,
@@ -250,15 +256,8 @@ pub fn run(args: StabilityArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Regenerates the dataset's survey (its `truth/manifest.ron` parameters) at `width × height`,
-/// with flat component colours or not, into `out`; returns the survey folder.
-fn regenerate(
-    dataset: &Path,
-    out: &Path,
-    width: u32,
-    height: u32,
-    flat: bool,
-) -> anyhow::Result<PathBuf> {
+/// The synthetic survey parameters in the dataset's `truth/manifest.ron`.
+fn synth_params(dataset: &Path) -> anyhow::Result<SynthParams> {
     let manifest_path = dataset.join("truth").join("manifest.ron");
     let text = std::fs::read_to_string(&manifest_path).with_context(|| {
         format!(
@@ -269,6 +268,18 @@ fn regenerate(
     })?;
     let manifest: Manifest =
         ron::from_str(&text).with_context(|| format!("reading {}", manifest_path.display()))?;
+    Ok(manifest.params)
+}
+
+/// Regenerates the survey `params` describe at `width × height`, with flat component colours or
+/// not, into `out`; returns the survey folder.
+fn regenerate(
+    params: &SynthParams,
+    out: &Path,
+    width: u32,
+    height: u32,
+    flat: bool,
+) -> anyhow::Result<PathBuf> {
     let params = SynthParams {
         out: out.to_path_buf(),
         width,
@@ -276,7 +287,7 @@ fn regenerate(
         surveys: 1,
         component_colours: flat,
         mask_noise: 0.0,
-        ..manifest.params
+        ..params.clone()
     };
     eprintln!(
         "generating {} ({width}×{height}, {} colours) …",
