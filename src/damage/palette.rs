@@ -62,9 +62,7 @@ impl Palette {
         self.colours[class.channel()] = [r, g, b];
         Ok(())
     }
-}
 
-impl Palette {
     /// Overlay colours for a scene, chosen against its photos as the published method recolours
     /// cracks blue on red brick: of the saturated colours of the RGB cube (channels 0, 128 or
     /// 255, at least one 0 and one 255), the thin classes (cracks, then rebar, then spalling)
