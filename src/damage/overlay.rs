@@ -131,27 +131,37 @@ pub fn base_colour_distance(splats: &Splats, g: usize, colour: [u8; 3]) -> f32 {
     d2.sqrt()
 }
 
-/// The overlay-mode class of each Gaussian read from its base colour: the nearest class colour
-/// within `tolerance` (8-bit RGB units), else none.
+/// The class of Gaussian `g` read from its base colour: of `classes`, the one whose colour is
+/// nearest, when within `tolerance` (8-bit RGB units; the first on a tie), else none.
+pub fn base_colour_class(
+    splats: &Splats,
+    g: usize,
+    palette: &Palette,
+    tolerance: f32,
+    classes: &[DamageClass],
+) -> Option<DamageClass> {
+    classes
+        .iter()
+        .map(|&class| {
+            (
+                class,
+                base_colour_distance(splats, g, palette.colour(class)),
+            )
+        })
+        .filter(|&(_, d)| d <= tolerance)
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(class, _)| class)
+}
+
+/// The overlay-mode class of each Gaussian read from its base colour (`base_colour_class` over
+/// every class).
 pub fn gaussian_classes(
     splats: &Splats,
     palette: &Palette,
     tolerance: f32,
 ) -> Vec<Option<DamageClass>> {
     (0..splats.len())
-        .map(|g| {
-            DamageClass::ALL
-                .iter()
-                .map(|&class| {
-                    (
-                        class,
-                        base_colour_distance(splats, g, palette.colour(class)),
-                    )
-                })
-                .filter(|&(_, d)| d <= tolerance)
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .map(|(class, _)| class)
-        })
+        .map(|g| base_colour_class(splats, g, palette, tolerance, &DamageClass::ALL))
         .collect()
 }
 

@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::damage::DamageClass;
+use crate::damage::overlay::OVERLAY_TOLERANCE;
 use crate::scene::RgbImage;
 use crate::splats::model::OverlayColours;
 
@@ -18,7 +19,7 @@ const CONTRAST_QUANTILE: f64 = 0.001;
 /// The read-back tolerance is half the chosen colours' contrast, within these bounds: 40 is the
 /// colour-coded mask reader's tolerance, and past 100 a blend of half damage and half wall
 /// (the edge of a painted crack) would read as damage.
-const TOLERANCE_RANGE: (f32, f32) = (40.0, 100.0);
+const TOLERANCE_RANGE: (f32, f32) = (OVERLAY_TOLERANCE, 100.0);
 
 /// One sRGB colour per class, in `DamageClass::ALL` order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

@@ -9,7 +9,7 @@ use std::time::Instant;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use serde::Serialize;
 
-use crate::damage::overlay::base_colour_distance;
+use crate::damage::overlay::base_colour_class;
 use crate::damage::{DamageClass, Palette, TrainMode};
 use crate::raster::RenderSettings;
 use crate::raster::weight_lift::WeightLift;
@@ -126,17 +126,16 @@ impl Selection {
 /// The candidate class of Gaussian `g`, if any: the most probable (label mode) or the nearest
 /// colour (overlay mode) among the configured classes that passes the filter.
 fn candidate_class(splats: &Splats, g: usize, config: &SelectConfig) -> Option<DamageClass> {
+    if config.mode == TrainMode::Overlay {
+        let (palette, tolerance) = (&config.palette, config.colour_tolerance);
+        return base_colour_class(splats, g, palette, tolerance, &config.classes);
+    }
     let mut best: Option<(DamageClass, f32)> = None;
     for &class in &config.classes {
         let score = match config.mode {
             TrainMode::Label if splats.label_channels > class.channel() => {
                 let p = sigmoid(splats.labels_of(g)[class.channel()]);
                 (p >= config.label_threshold).then_some(p)
-            }
-            TrainMode::Overlay => {
-                let d = base_colour_distance(splats, g, config.palette.colour(class));
-                // A smaller distance is a better score.
-                (d <= config.colour_tolerance).then_some(-d)
             }
             _ => None,
         };
