@@ -31,7 +31,8 @@ struct Uniforms {
     isect_capacity: u32,
     // alpha = min(alpha_max, opacity · exp(-power)): 0.99 (3DGS), 0.999 (gsplat).
     alpha_max: f32,
-    pad1: u32,
+    // Backward only: whether colour gradients flow through the SH view direction to the means.
+    sh_direction_grad: u32,
     pad2: u32,
 }
 

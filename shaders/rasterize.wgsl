@@ -3,7 +3,9 @@
 // every pixel blends them front to back exactly as the CPU reference: alpha = min(alpha_max, o·e^-σ),
 // skip alpha < 1/255, stop before transmittance would fall to 1e-4. The loop ends early once
 // every pixel of the tile is done. Writes colour (composited on the background), alpha, depth
-// (Σ z·α·T, not normalised), label channels (Σ p·α·T) and an Rgba8Unorm texture for display.
+// (Σ z·α·T, not normalised), label channels (Σ p·α·T), an Rgba8Unorm texture for display, and
+// per pixel what the backward replays from: the final transmittance and how many of the tile's
+// Gaussians it went through to its last blended one.
 
 const BATCH: u32 = 256u;
 const ALPHA_MIN: f32 = 0.00392156862745098; // 1/255
@@ -18,6 +20,8 @@ const T_MIN: f32 = 1e-4;
 @group(0) @binding(6) var<storage, read_write> out_depth: array<f32>;
 @group(0) @binding(7) var<storage, read_write> out_labels: array<f32>;
 @group(0) @binding(8) var out_texture: texture_storage_2d<rgba8unorm, write>;
+// (bits of T_final, 1 + index in the tile's range of the last blended Gaussian; 0: none).
+@group(0) @binding(9) var<storage, read_write> out_state: array<vec2<u32>>;
 
 // x, y, opacity, depth | conic a, b, c, unused | r, g, b, unused | gaussian id
 var<workgroup> batch_xy_opacity: array<vec4<f32>, BATCH>;
@@ -52,6 +56,7 @@ fn rasterize(
         acc_labels[k] = 0.0;
     }
     var done = !inside;
+    var last = 0u;
     if t == 0u {
         atomicStore(&done_count, 0u);
     }
@@ -103,6 +108,7 @@ fn rasterize(
                     acc_labels[k] += labels[gid * u.label_channels + k] * weight;
                 }
                 transmittance = next_t;
+                last = b * BATCH + j + 1u;
             }
             if done {
                 atomicAdd(&done_count, 1u);
@@ -115,6 +121,7 @@ fn rasterize(
         let final_color = color + transmittance * u.background.xyz;
         out_color[pix] = vec4<f32>(final_color, 1.0 - transmittance);
         out_depth[pix] = depth;
+        out_state[pix] = vec2<u32>(bitcast<u32>(transmittance), last);
         for (var k = 0u; k < lc; k = k + 1u) {
             out_labels[pix * u.label_channels + k] = acc_labels[k];
         }

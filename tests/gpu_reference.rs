@@ -82,6 +82,7 @@ fn check_case(file: &str) {
         background: Vec3::ZERO,
         sh_degree: 3,
         alpha_max: 0.999,
+        sh_direction_grad: false,
     };
     let mut gpu = GpuRenderer::new(&ctx).unwrap();
     gpu.upload(&splats).unwrap();

@@ -22,6 +22,8 @@ pub(super) struct FrameBuffers {
     pub(super) out_color: wgpu::Buffer,
     pub(super) out_depth: wgpu::Buffer,
     pub(super) out_labels: wgpu::Buffer,
+    /// Per pixel (T_final bits, blended count): what the backward pass replays from.
+    pub(super) out_state: wgpu::Buffer,
     pub(super) texture: wgpu::Texture,
     pub(super) view: wgpu::TextureView,
 }
@@ -80,6 +82,7 @@ impl FrameBuffers {
                 pixels * label_channels as u64 * 4,
                 none,
             ),
+            out_state: kernel::storage(device, "out_state", pixels * 8, none),
             texture,
             view,
         }

@@ -1,7 +1,9 @@
-//! The GPU forward pass: wgpu compute kernels (`shaders/*.wgsl`) doing the same stages as the CPU
-//! reference in `raster` (project, sort, tile ranges, rasterize), each tested against it.
-//! Host launch code lives here, one file per stage; no UI code and no per-frame read-back.
+//! The GPU renderer: wgpu compute kernels (`shaders/*.wgsl`) doing the same stages as the CPU
+//! reference in `raster` (project, sort, tile ranges, rasterize, and the backward of rasterize and
+//! project), each tested against it. Host launch code lives here, one file per stage; no UI code.
+//! The viewer's forward never reads back; the trainer's backend ([`GpuBackend`]) does, per step.
 
+pub mod backward;
 pub mod context;
 mod count_probe;
 pub mod emit;
@@ -16,10 +18,12 @@ pub mod renderer;
 pub mod splat_buffers;
 pub mod tile_ranges;
 pub mod timing;
+pub mod train_backend;
 
 pub use context::{GpuCapabilities, GpuContext};
 pub use renderer::{GpuFrame, GpuRenderSettings, GpuRenderer};
 pub use splat_buffers::SplatBuffers;
+pub use train_backend::GpuBackend;
 
 /// Errors at the GPU module's edge.
 #[derive(Debug, thiserror::Error)]

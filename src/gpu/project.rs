@@ -51,7 +51,9 @@ pub struct FrameUniforms {
     pub opacities_at: u32,
     pub isect_capacity: u32,
     pub alpha_max: f32,
-    pub pad: [u32; 2],
+    /// Backward only: 1 when colour gradients flow through the SH view direction to the means.
+    pub sh_direction_grad: u32,
+    pub pad: u32,
 }
 
 /// Tiles across and down for an image size.
@@ -94,7 +96,8 @@ impl FrameUniforms {
             opacities_at: layout.opacities_at,
             isect_capacity,
             alpha_max: settings.alpha_max,
-            pad: [0; 2],
+            sh_direction_grad: settings.sh_direction_grad as u32,
+            pad: 0,
         }
     }
 }

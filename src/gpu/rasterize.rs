@@ -18,6 +18,8 @@ pub struct RasterBuffers<'a> {
     pub out_depth: &'a wgpu::Buffer,
     pub out_labels: &'a wgpu::Buffer,
     pub out_texture: &'a wgpu::TextureView,
+    /// Per pixel the final transmittance's bits and its blended count (the backward's start).
+    pub out_state: &'a wgpu::Buffer,
 }
 
 pub struct RasterizeStage {
@@ -51,6 +53,7 @@ impl RasterizeStage {
                 (6, Bind::Buffer(b.out_depth)),
                 (7, Bind::Buffer(b.out_labels)),
                 (8, Bind::Texture(b.out_texture)),
+                (9, Bind::Buffer(b.out_state)),
             ],
         );
         pass.set_pipeline(&self.pipeline);

@@ -33,6 +33,8 @@ pub struct GpuRenderSettings {
     pub sh_degree: u32,
     /// `alpha = min(alpha_max, opacity · exp(-power))`: 0.99 in 3DGS (default), 0.999 in gsplat.
     pub alpha_max: f32,
+    /// Backward only (see `raster::RenderSettings::sh_direction_grad`).
+    pub sh_direction_grad: bool,
 }
 
 impl Default for GpuRenderSettings {
@@ -48,6 +50,7 @@ impl From<&RenderSettings> for GpuRenderSettings {
             background: s.background,
             sh_degree: s.sh_degree,
             alpha_max: s.alpha_max,
+            sh_direction_grad: s.sh_direction_grad,
         }
     }
 }
@@ -95,6 +98,21 @@ struct FramePlan {
     num_gaussians: u32,
     tile_bounds: [u32; 2],
     tile_bits: u32,
+}
+
+/// What the last forward left on the GPU, for the backward kernels to replay.
+pub(super) struct ForwardState<'a> {
+    pub(super) uniforms: &'a wgpu::Buffer,
+    pub(super) ranges: &'a wgpu::Buffer,
+    /// Gaussian ids of the sorted intersections.
+    pub(super) isect_gids: &'a wgpu::Buffer,
+    pub(super) projected: &'a wgpu::Buffer,
+    pub(super) labels: &'a wgpu::Buffer,
+    pub(super) out_state: &'a wgpu::Buffer,
+    pub(super) geometry: &'a wgpu::Buffer,
+    pub(super) sh: &'a wgpu::Buffer,
+    pub(super) tile_bounds: [u32; 2],
+    pub(super) num_gaussians: u32,
 }
 
 /// The GPU forward pass over one uploaded model.
@@ -371,6 +389,7 @@ impl GpuRenderer {
                         out_depth: &frame.out_depth,
                         out_labels: &frame.out_labels,
                         out_texture: &frame.view,
+                        out_state: &frame.out_state,
                     },
                     plan.tile_bounds,
                 );
@@ -435,6 +454,25 @@ impl GpuRenderer {
     ) -> Result<GpuFrame, GpuError> {
         self.render_blocking(camera, settings)?;
         self.read_frame()
+    }
+
+    /// The last frame's buffers for the backward (None before the first frame).
+    pub(super) fn forward_state(&self) -> Option<ForwardState<'_>> {
+        let frame = self.frame.as_ref()?;
+        let plan = self.plan.as_ref()?;
+        let (_, isect_gids) = self.sorted_isects(plan);
+        Some(ForwardState {
+            uniforms: &frame.uniforms,
+            ranges: &frame.ranges,
+            isect_gids,
+            projected: &frame.projected,
+            labels: &frame.labels,
+            out_state: &frame.out_state,
+            geometry: self.splats.geometry(),
+            sh: self.splats.sh(),
+            tile_bounds: plan.tile_bounds,
+            num_gaussians: plan.num_gaussians,
+        })
     }
 
     /// Reads the last frame's outputs back.

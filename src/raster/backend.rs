@@ -46,6 +46,12 @@ pub trait RasterBackend: Send {
 
     /// Wall time per stage of the last forward and backward.
     fn timings(&self) -> StageTimings;
+
+    /// Why the renderer stopped working (a lost GPU device), if it did: the frames since are
+    /// zero and the run must end. The CPU rasterizer never fails.
+    fn fault(&self) -> Option<&str> {
+        None
+    }
 }
 
 impl RasterBackend for Rasterizer {

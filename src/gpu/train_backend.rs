@@ -1,0 +1,235 @@
+//! The GPU as the trainer's renderer: [`RasterBackend`] over [`GpuRenderer`] and the backward
+//! kernels. Per step it uploads the model, renders, reads the frame back for the loss (on the
+//! CPU), uploads the pixel gradients, runs both backward kernels and reads the parameter
+//! gradients back; Adam and density control stay on the CPU. A GPU failure does not panic: the
+//! step's outputs are zero and [`RasterBackend::fault`] names it, which ends the run.
+
+use std::time::Instant;
+
+use super::backward::{BackwardBuffers, BackwardStage, PARAM_FLOATS, PIXEL_FLOATS};
+use super::{GpuContext, GpuError, GpuRenderSettings, GpuRenderer, readback};
+use crate::raster::{
+    PixelGrads, RasterBackend, RenderOutput, RenderSettings, SplatGrads, StageTimings,
+};
+use crate::scene::Camera;
+use crate::splats::Splats;
+
+pub struct GpuBackend {
+    renderer: GpuRenderer,
+    backward: BackwardStage,
+    buffers: Option<BackwardBuffers>,
+    /// Pixel gradients packed for upload (stride `PIXEL_FLOATS` + label channels).
+    packed: Vec<f32>,
+    radii: Vec<u32>,
+    timings: StageTimings,
+    fault: Option<String>,
+}
+
+impl GpuBackend {
+    /// Float atomics accumulate the gradients where the device has them, a compare-and-swap
+    /// loop otherwise.
+    pub fn new(ctx: &GpuContext) -> Result<GpuBackend, GpuError> {
+        GpuBackend::with_accumulation(ctx, ctx.capabilities.float32_atomics)
+    }
+
+    /// `new`, choosing the accumulation (tests run both on one device).
+    pub fn with_accumulation(
+        ctx: &GpuContext,
+        float_atomics: bool,
+    ) -> Result<GpuBackend, GpuError> {
+        if float_atomics && !ctx.capabilities.float32_atomics {
+            return Err(GpuError::Device(
+                "this device has no float atomics (SHADER_FLOAT32_ATOMIC)".into(),
+            ));
+        }
+        Ok(GpuBackend {
+            renderer: GpuRenderer::new(ctx)?,
+            backward: BackwardStage::new(&ctx.device, float_atomics),
+            buffers: None,
+            packed: Vec::new(),
+            radii: Vec::new(),
+            timings: StageTimings::default(),
+            fault: None,
+        })
+    }
+
+    /// The adapter and how gradients are accumulated, for logs.
+    pub fn describe(&self) -> String {
+        let how = if self.backward.float_atomics() {
+            "float atomics"
+        } else {
+            "compare-and-swap"
+        };
+        format!("{}, {how}", self.renderer.context().describe())
+    }
+
+    pub fn renderer(&self) -> &GpuRenderer {
+        &self.renderer
+    }
+
+    fn try_forward(
+        &mut self,
+        splats: &Splats,
+        camera: &Camera,
+        settings: &RenderSettings,
+        out: &mut RenderOutput,
+    ) -> Result<(), GpuError> {
+        let t = Instant::now();
+        self.renderer.upload(splats)?;
+        self.timings.project = t.elapsed();
+        let t = Instant::now();
+        self.renderer
+            .render_blocking(camera, &GpuRenderSettings::from(settings))?;
+        let frame = self.renderer.read_frame()?;
+        out.width = frame.width;
+        out.height = frame.height;
+        out.label_channels = frame.label_channels;
+        out.color = frame.color;
+        out.alpha = frame.alpha;
+        out.depth = frame.depth;
+        out.labels = frame.labels;
+        self.timings.raster_forward = t.elapsed();
+        Ok(())
+    }
+
+    fn try_backward(
+        &mut self,
+        splats: &Splats,
+        v_out: &PixelGrads,
+        grads: &mut SplatGrads,
+    ) -> Result<(), GpuError> {
+        let t = Instant::now();
+        let ctx = self.renderer.context().clone();
+        let n = splats.len();
+        let l = splats.label_channels;
+        let sh_floats = splats.sh_coeffs() * 3;
+        let pixels = v_out.color.len() / 3;
+        let stride = PIXEL_FLOATS + l;
+        self.packed.clear();
+        self.packed.resize(pixels * stride, 0.0);
+        for (p, cell) in self.packed.chunks_exact_mut(stride).enumerate() {
+            cell[..3].copy_from_slice(&v_out.color[p * 3..p * 3 + 3]);
+            cell[3] = v_out.alpha.map_or(0.0, |a| a[p]);
+            cell[4] = v_out.depth.map_or(0.0, |d| d[p]);
+            if let Some(labels) = v_out.labels {
+                cell[PIXEL_FLOATS..].copy_from_slice(&labels[p * l..(p + 1) * l]);
+            }
+        }
+        let capacity = self.renderer.splat_buffers().capacity().max(1);
+        if !self
+            .buffers
+            .as_ref()
+            .is_some_and(|b| b.fits(capacity, pixels, l, sh_floats))
+        {
+            self.buffers = Some(BackwardBuffers::new(
+                &ctx.device,
+                capacity,
+                pixels,
+                l,
+                sh_floats,
+            ));
+        }
+        let buffers = self
+            .buffers
+            .as_ref()
+            .ok_or(GpuError::Device("backward buffers missing".into()))?;
+        ctx.queue
+            .write_buffer(&buffers.v_pixels, 0, bytemuck::cast_slice(&self.packed));
+        let forward = self
+            .renderer
+            .forward_state()
+            .ok_or(GpuError::Readback("backward before any forward".into()))?;
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        self.backward
+            .encode_rasterize(&ctx.device, &mut encoder, &forward, buffers);
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait_idle()?;
+        self.timings.raster_backward = t.elapsed();
+
+        let t = Instant::now();
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        self.backward
+            .encode_project(&ctx.device, &mut encoder, &forward, buffers);
+        ctx.queue.submit([encoder.finish()]);
+        let params = readback::read_f32(&ctx, &buffers.param_grads, n * PARAM_FLOATS)?;
+        let v_sh = readback::read_f32(&ctx, &buffers.v_sh, n * sh_floats)?;
+        let v_raw_labels = readback::read_f32(&ctx, &buffers.v_raw_labels, n * l)?;
+        grads.reset(splats);
+        self.radii.clear();
+        for (g, p) in params.chunks_exact(PARAM_FLOATS).enumerate() {
+            grads.v_means[g] = glam::Vec3::new(p[0], p[1], p[2]);
+            grads.v_log_scales[g] = glam::Vec3::new(p[3], p[4], p[5]);
+            grads.v_rotations[g] = glam::Vec4::new(p[6], p[7], p[8], p[9]);
+            grads.v_raw_opacities[g] = p[10];
+            grads.v_means2d_norm[g] = p[11];
+            let radius = p[12].to_bits();
+            grads.visible[g] = radius > 0;
+            self.radii.push(radius);
+        }
+        grads.v_sh.copy_from_slice(&v_sh);
+        grads.v_raw_labels.copy_from_slice(&v_raw_labels);
+        self.timings.project_backward = t.elapsed();
+        Ok(())
+    }
+}
+
+impl RasterBackend for GpuBackend {
+    fn name(&self) -> &'static str {
+        "gpu"
+    }
+
+    fn forward(
+        &mut self,
+        splats: &Splats,
+        camera: &Camera,
+        settings: &RenderSettings,
+        out: &mut RenderOutput,
+    ) {
+        if let Err(e) = self.try_forward(splats, camera, settings, out) {
+            self.fault.get_or_insert(format!("GPU forward failed: {e}"));
+            let k = camera.intrinsics;
+            let pixels = (k.width * k.height) as usize;
+            out.width = k.width;
+            out.height = k.height;
+            out.label_channels = splats.label_channels;
+            out.color = vec![0.0; pixels * 3];
+            out.alpha = vec![0.0; pixels];
+            out.depth = vec![0.0; pixels];
+            out.labels = vec![0.0; pixels * splats.label_channels];
+        }
+    }
+
+    fn backward(
+        &mut self,
+        splats: &Splats,
+        _camera: &Camera,
+        _settings: &RenderSettings,
+        v_out: &PixelGrads,
+        grads: &mut SplatGrads,
+    ) {
+        if let Err(e) = self.try_backward(splats, v_out, grads) {
+            self.fault
+                .get_or_insert(format!("GPU backward failed: {e}"));
+            grads.reset(splats);
+            self.radii.clear();
+            self.radii.resize(splats.len(), 0);
+        }
+    }
+
+    /// Per Gaussian the radius of the last forward, as its backward read it back (the trainer
+    /// reads radii after the backward).
+    fn radii(&self) -> &[u32] {
+        &self.radii
+    }
+
+    /// `project`: the model upload; `raster_forward`: the forward kernels and the frame's
+    /// read-back; `raster_backward`: the pixel gradients' upload and the rasterize backward;
+    /// `project_backward`: the projection backward and the gradients' read-back.
+    fn timings(&self) -> StageTimings {
+        self.timings
+    }
+
+    fn fault(&self) -> Option<&str> {
+        self.fault.as_deref()
+    }
+}
