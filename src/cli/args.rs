@@ -11,6 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use damage_twin::damage::Palette;
 use damage_twin::scene::open::OpenOptions;
 use damage_twin::scene::{Dataset, ImageScale};
+use damage_twin::train::backend_choice::Backend;
 use damage_twin::train::job::{Job, JobEvent, Progress};
 use damage_twin::train::views::Holdout;
 
@@ -36,6 +37,10 @@ pub struct RunArgs {
     /// Random initial points when the dataset has none (NeRF-synthetic, instant-ngp).
     #[arg(long, default_value_t = 100_000)]
     pub init_points: usize,
+    /// The renderer that trains: cpu, gpu (any GPU through wgpu, a software driver included)
+    /// or auto (a hardware GPU when there is one, else the CPU).
+    #[arg(long, default_value = "cpu")]
+    pub backend: Backend,
 }
 
 /// Which views are held out: the rule `train`, `bench`, `eval` and `study` share.

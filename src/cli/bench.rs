@@ -30,6 +30,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seed: args.run.seed,
         background: args.run.background,
         random_points: args.run.init_points,
+        backend: args.run.backend,
         ..RunConfig::default()
     };
     let job = bench_job(dataset, config, JobOptions::headless(args.run.threads));

@@ -43,6 +43,9 @@ pub struct Args {
     pub scale: ImageScale,
     #[arg(long, default_value_t = 1000)]
     pub iters: u32,
+    /// The renderer that trains: cpu, gpu or auto (see `train --backend`).
+    #[arg(long, default_value = "cpu")]
+    pub backend: damage_twin::train::backend_choice::Backend,
     /// Hull dilation in pixels at the refinement scale.
     #[arg(long, default_value_t = HullConfig::default().dilate_px)]
     pub dilate: f32,
@@ -148,6 +151,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         background: args.background,
         seed: args.seed,
         label_pos_weight: args.label_pos_weight,
+        backend: args.backend,
         ..RefineConfig::default()
     };
     let job = refine_job(

@@ -138,6 +138,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_gaussians: args.max_gaussians,
         budget: args.budget,
         contrasting_palette: args.colours.is_empty(),
+        backend: args.run.backend,
         appearance: args
             .appearance
             .then(|| damage_twin::train::appearance::AppearanceConfig {

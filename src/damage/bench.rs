@@ -22,6 +22,11 @@ pub struct BenchReport {
     pub height: u32,
     pub train_views: usize,
     pub iterations: u32,
+    /// The renderer that trained (`--backend`): for the GPU, `stage_ms_per_iteration` reads
+    /// `project` as the model's upload, `rasterize` as the forward kernels and the frame's
+    /// read-back, `rasterize_backward` as the pixel gradients' upload and that kernel,
+    /// `project_backward` as that kernel and the gradients' read-back.
+    pub renderer: String,
     pub threads: usize,
     /// The SIMD build the CPU kernels ran (`DAMAGE_TWIN_SIMD` can lower it).
     pub simd: &'static str,
@@ -80,6 +85,7 @@ pub fn bench_job(
             height,
             train_views,
             iterations: steps,
+            renderer: outcome.renderer.clone(),
             threads: rayon::current_num_threads(),
             simd: crate::simd::simd_level().name(),
             seconds,

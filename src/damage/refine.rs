@@ -90,6 +90,8 @@ pub struct RefineConfig {
     pub lr: crate::train::spec::LrOverrides,
     /// Each refined Gaussian's scale stays within this factor of its size before (None: free).
     pub max_scale_growth: Option<f32>,
+    /// The renderer the refinement trains on.
+    pub backend: crate::train::backend_choice::Backend,
 }
 
 impl Default for RefineConfig {
@@ -118,6 +120,7 @@ impl Default for RefineConfig {
             given: None,
             lr: crate::train::spec::LrOverrides::default(),
             max_scale_growth: None,
+            backend: Default::default(),
         }
     }
 }
@@ -475,6 +478,7 @@ fn refine_spec(config: &RefineConfig, model: &Splats, labels: bool) -> TrainSpec
     spec.lr = config.lr;
     spec.lr.raw_labels = config.label_lr.or(config.lr.raw_labels);
     spec.max_scale_growth = config.max_scale_growth;
+    spec.backend = config.backend;
     spec.densify = match config.strategy {
         Strategy::Finetune => DensifyPolicy::Off,
         // No opacity reset: in a short local run it would blank the damage mid-way, and the

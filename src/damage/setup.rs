@@ -85,6 +85,8 @@ pub struct RunConfig {
     /// Overlay mode: paint the damage in colours chosen against the training photos
     /// (`Palette::contrasting`) instead of `palette`.
     pub contrasting_palette: bool,
+    /// The renderer the run trains on.
+    pub backend: crate::train::backend_choice::Backend,
 }
 
 impl Default for RunConfig {
@@ -113,6 +115,7 @@ impl Default for RunConfig {
             // docs/DAMAGE.md: the default pink of spalling is within 70 of the demo's sunlit
             // plaster, so a tolerance that keeps blended edges reads the walls as spalling.
             contrasting_palette: true,
+            backend: Default::default(),
         }
     }
 }
@@ -265,6 +268,7 @@ pub fn model_and_spec(
     spec.background = config.background;
     spec.eval_every = config.eval_every;
     spec.appearance = config.appearance;
+    spec.backend = config.backend;
     spec.targets.label_weight = if label_channels > 0 {
         config.label_weight
     } else {

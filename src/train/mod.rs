@@ -4,6 +4,7 @@
 
 pub mod adam;
 pub mod appearance;
+pub mod backend_choice;
 pub mod densify;
 pub mod evaluate;
 pub mod guards;

@@ -6,10 +6,11 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use crate::splats::Splats;
+use crate::train::backend_choice::open_backend;
 use crate::train::evaluate::EvalScores;
 use crate::train::job::{Job, JobContext, JobError, JobOptions, Progress};
 use crate::train::spec::{TrainSpec, TrainView};
-use crate::train::trainer::{StageTimes, Trainer};
+use crate::train::trainer::{StageTimes, TrainError, Trainer};
 
 /// What a training run trains: the spec, the initial model, the views and the held-out views
 /// (built on the worker, so that loading a dataset does not block the caller).
@@ -39,6 +40,8 @@ pub struct TrainOutcome {
     /// Each training view's learnt light, in the spec's view order (empty unless the spec
     /// learns it: `TrainSpec::appearance`).
     pub appearance: Vec<crate::scene::project::ColourTransform>,
+    /// The renderer that trained, in words ("CPU rasterizer", "GPU: <adapter>, <accumulation>").
+    pub renderer: String,
 }
 
 /// A training job.
@@ -74,10 +77,15 @@ pub fn run_training(
         heldout,
     } = setup;
     let eval_every = spec.eval_every;
-    let mut trainer = Trainer::new(spec, splats, views)?;
+    let choice = spec.backend;
+    let (backend, renderer) = open_backend(choice).map_err(|source| TrainError::Backend {
+        backend: choice,
+        source,
+    })?;
+    let mut trainer = Trainer::with_backend(spec, splats, views, backend)?;
     let total = trainer.total_steps();
     ctx.log(format!(
-        "training {} Gaussians on {} views for {total} steps",
+        "training {} Gaussians on {} views for {total} steps ({renderer})",
         trainer.splats().len(),
         trainer.view_count()
     ));
@@ -92,6 +100,9 @@ pub fn run_training(
         }
         let started = Instant::now();
         let report = trainer.step();
+        if let Some(fault) = trainer.renderer_fault() {
+            return Err(TrainError::RendererFault(fault.to_string()).into());
+        }
         if let Some(reason) = report.rolled_back {
             rolled_back += 1;
             ctx.rolled_back(report.step, reason);
@@ -141,5 +152,6 @@ pub fn run_training(
         rolled_back,
         timings,
         appearance,
+        renderer,
     })
 }

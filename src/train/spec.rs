@@ -204,6 +204,9 @@ pub struct TrainSpec {
     pub max_scale_growth: Option<f32>,
     /// Learn each training photo's light (`appearance`; None: the photos as they are).
     pub appearance: Option<crate::train::appearance::AppearanceConfig>,
+    /// The renderer the run trains on (CPU by default).
+    #[serde(default)]
+    pub backend: crate::train::backend_choice::Backend,
 }
 
 impl TrainSpec {
@@ -224,6 +227,7 @@ impl TrainSpec {
             eval_every: 0,
             max_scale_growth: None,
             appearance: None,
+            backend: Default::default(),
         }
     }
 

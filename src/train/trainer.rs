@@ -53,6 +53,13 @@ pub enum TrainError {
     Splats(String),
     #[error("the initial splats contain NaN or Inf ({0})")]
     NonFinite(&'static str),
+    #[error("backend {backend}: {source}")]
+    Backend {
+        backend: crate::train::backend_choice::Backend,
+        source: crate::gpu::GpuError,
+    },
+    #[error("the renderer failed during training: {0}")]
+    RendererFault(String),
 }
 
 /// Seconds spent per stage, summed over steps.
@@ -294,6 +301,11 @@ impl Trainer {
             splats,
             views,
         })
+    }
+
+    /// Why the renderer stopped working, if it did (see `RasterBackend::fault`).
+    pub fn renderer_fault(&self) -> Option<&str> {
+        self.rasterizer.fault()
     }
 
     pub fn total_steps(&self) -> u32 {

@@ -33,6 +33,9 @@ pub struct Args {
     /// their look better; new thin damage is learnt less: docs/TIMELINE.md).
     #[arg(long)]
     pub gentle_rates: bool,
+    /// The renderer that trains: cpu, gpu or auto (see `train --backend`).
+    #[arg(long, default_value = "cpu")]
+    pub backend: damage_twin::train::backend_choice::Backend,
     #[arg(long)]
     pub threads: Option<usize>,
     #[arg(long)]
@@ -50,6 +53,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         !args.no_appearance,
     );
     config.refine.max_scale_growth = (args.max_scale_growth > 0.0).then_some(args.max_scale_growth);
+    config.refine.backend = args.backend;
     if args.gentle_rates {
         config.refine.lr = damage_twin::timeline::update::gentle_learning_rates();
     }
