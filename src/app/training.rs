@@ -10,6 +10,7 @@ use crossbeam_channel::TryRecvError;
 use crate::damage::setup::{RunConfig, TrainingSettings, train_job};
 use crate::scene::Dataset;
 use crate::splats::Splats;
+use crate::train::backend_choice::Backend;
 use crate::train::history::History;
 use crate::train::job::{JobEvent, JobOptions, Progress};
 use crate::train::run::{TrainJob, TrainOutcome};
@@ -75,7 +76,12 @@ impl TrainingSession {
             // must not wait for a training step.
             low_priority: true,
         };
-        let config = RunConfig::interactive(&settings, palette, background);
+        let config = RunConfig {
+            // Train on a hardware GPU when there is one (a software driver stays slower than
+            // the CPU rasterizer).
+            backend: Backend::Auto,
+            ..RunConfig::interactive(&settings, palette, background)
+        };
         let job = train_job(dataset, config, options);
         TrainingSession {
             job: Some(job),

@@ -7,7 +7,9 @@ use serde::Serialize;
 
 use crate::damage::TrainMode;
 use crate::damage::setup::{RunConfig, prepare_run};
+use crate::gpu::{GpuBackend, GpuContext};
 use crate::metrics::peak_rss_mb;
+use crate::raster::{PixelGrads, RasterBackend, RenderOutput, RenderSettings};
 use crate::scene::Dataset;
 use crate::splats::Splats;
 use crate::train::job::{Job, JobError, JobOptions};
@@ -42,11 +44,40 @@ pub struct BenchReport {
     /// Parameters + gradients + Adam moments + density statistics.
     pub training_bytes_per_gaussian: usize,
     pub heldout_psnr: Option<f64>,
+    /// On the GPU backend: one step of the final model on the first training view, timed per
+    /// kernel and per transfer.
+    pub gpu_step_ms: Option<crate::gpu::StepProfile>,
 }
 
 /// f32 values per Gaussian of the parameters.
 fn floats_per_gaussian(splats: &Splats) -> usize {
     3 + 3 + 4 + 1 + splats.sh_coeffs() * 3 + splats.label_channels
+}
+
+/// One GPU step of `splats` on `view` timed per stage, with the L1 loss's pixel gradients.
+fn profile_gpu_step(
+    splats: &Splats,
+    view: &crate::train::spec::TrainView,
+    settings: &RenderSettings,
+) -> Result<crate::gpu::StepProfile, crate::gpu::GpuError> {
+    let ctx = GpuContext::new()?;
+    let mut backend = GpuBackend::new(&ctx)?;
+    let mut out = RenderOutput::default();
+    backend.forward(splats, &view.camera, settings, &mut out);
+    let n = out.color.len().max(1) as f32;
+    let v_color: Vec<f32> = out
+        .color
+        .iter()
+        .zip(&view.image.data)
+        .map(|(r, p)| (r - p).signum() / n)
+        .collect();
+    let v_out = PixelGrads {
+        color: &v_color,
+        alpha: None,
+        depth: None,
+        labels: None,
+    };
+    backend.profile_step(splats, &view.camera, settings, &v_out)
 }
 
 /// Benchmarks `config` (run in RGB mode: the benchmark times the photometric engine) on
@@ -74,11 +105,21 @@ pub fn bench_job(
         let (width, height) = (first.image.width, first.image.height);
         let train_views = run.setup.views.len();
         let initial_gaussians = run.setup.splats.len();
+        let profile_view = first.clone();
+        let settings = RenderSettings::new(config.background, config.sh_degree);
         // The run itself, exactly as a training job runs it, in this job's thread pool.
         let outcome = run_training(ctx, run.setup, "train")?;
         let steps = outcome.steps;
         let seconds = outcome.timings.total;
         let floats = floats_per_gaussian(&outcome.splats);
+        let gpu_step_ms = if outcome.renderer.starts_with("GPU") {
+            Some(
+                profile_gpu_step(&outcome.splats, &profile_view, &settings)
+                    .map_err(|e| JobError::Other(Box::new(e)))?,
+            )
+        } else {
+            None
+        };
         Ok(BenchReport {
             dataset: dataset.root.display().to_string(),
             width,
@@ -99,6 +140,7 @@ pub fn bench_job(
             // and the densifier's three statistics.
             training_bytes_per_gaussian: floats * 4 * 4 + 11 + 1 + 4 + 4 + 12,
             heldout_psnr: outcome.heldout.map(|s| s.psnr),
+            gpu_step_ms,
         })
     })
 }

@@ -107,19 +107,38 @@ impl GpuContext {
     }
 
     pub async fn new_async() -> Result<GpuContext, GpuError> {
+        Self::create(false).await?.ok_or(GpuError::NoAdapter)
+    }
+
+    /// A device on the best adapter when that is a hardware GPU; `None` when the best is a
+    /// software rasterizer or there is none (no device is created then).
+    pub fn new_hardware() -> Result<Option<GpuContext>, GpuError> {
+        pollster::block_on(Self::create(true))
+    }
+
+    async fn create(hardware_only: bool) -> Result<Option<GpuContext>, GpuError> {
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
         desc.backends = backends;
         let instance = wgpu::Instance::new(desc);
         let adapters = instance.enumerate_adapters(backends).await;
-        let adapter = pick_adapter(&adapters).ok_or(GpuError::NoAdapter)?;
+        let Some(adapter) = pick_adapter(&adapters) else {
+            return if hardware_only {
+                Ok(None)
+            } else {
+                Err(GpuError::NoAdapter)
+            };
+        };
+        if hardware_only && adapter.get_info().device_type == wgpu::DeviceType::Cpu {
+            return Ok(None);
+        }
         let (device, queue) = adapter
             .request_device(&device_descriptor(adapter))
             .await
             .map_err(|e| GpuError::Device(e.to_string()))?;
         let mut ctx = GpuContext::from_device(adapter, device, queue);
         ctx._instance = Some(Arc::new(instance));
-        Ok(ctx)
+        Ok(Some(ctx))
     }
 
     /// Wraps an existing device (e.g. eframe's `RenderState { adapter, device, queue, .. }`), so

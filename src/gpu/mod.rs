@@ -23,7 +23,7 @@ pub mod train_backend;
 pub use context::{GpuCapabilities, GpuContext};
 pub use renderer::{GpuFrame, GpuRenderSettings, GpuRenderer};
 pub use splat_buffers::SplatBuffers;
-pub use train_backend::GpuBackend;
+pub use train_backend::{GpuBackend, StepProfile};
 
 /// Errors at the GPU module's edge.
 #[derive(Debug, thiserror::Error)]

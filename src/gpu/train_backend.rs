@@ -173,6 +173,87 @@ impl GpuBackend {
     }
 }
 
+/// Milliseconds per stage of one training step's renderer work on the GPU (the bench).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct StepProfile {
+    /// How the forward kernels were timed: "gpu-timestamps" or "wall-clock" (submit and wait
+    /// per stage). The backward kernels and the transfers are wall-clock, submit to completion.
+    pub forward_source: &'static str,
+    pub stages: Vec<(&'static str, f64)>,
+    pub intersections: u32,
+}
+
+impl GpuBackend {
+    /// One step's renderer work timed stage by stage: the model's upload, every forward kernel,
+    /// the frame's read-back, the pixel gradients' upload, the two backward kernels and the
+    /// gradients' read-back. Runs one untimed step first so that buffers already fit.
+    pub fn profile_step(
+        &mut self,
+        splats: &Splats,
+        camera: &Camera,
+        settings: &RenderSettings,
+        v_out: &PixelGrads,
+    ) -> Result<StepProfile, GpuError> {
+        let mut out = RenderOutput::default();
+        let mut grads = SplatGrads::zeros(splats);
+        self.try_forward(splats, camera, settings, &mut out)?;
+        self.try_backward(splats, v_out, &mut grads)?;
+        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+        let ctx = self.renderer.context().clone();
+        let mut stages = Vec::new();
+
+        let t = Instant::now();
+        self.renderer.upload(splats)?;
+        ctx.wait_idle()?;
+        stages.push(("upload_model", ms(t)));
+        let gpu_settings = GpuRenderSettings::from(settings);
+        let forward = self.renderer.render_timed(camera, &gpu_settings)?;
+        stages.extend(forward.stages.iter().copied());
+        let t = Instant::now();
+        self.renderer.read_frame()?;
+        stages.push(("read_frame", ms(t)));
+
+        let buffers = self
+            .buffers
+            .as_ref()
+            .ok_or(GpuError::Device("backward buffers missing".into()))?;
+        let t = Instant::now();
+        ctx.queue
+            .write_buffer(&buffers.v_pixels, 0, bytemuck::cast_slice(&self.packed));
+        ctx.wait_idle()?;
+        stages.push(("upload_pixel_grads", ms(t)));
+        let state = self
+            .renderer
+            .forward_state()
+            .ok_or(GpuError::Readback("nothing rendered".into()))?;
+        let t = Instant::now();
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        self.backward
+            .encode_rasterize(&ctx.device, &mut encoder, &state, buffers);
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait_idle()?;
+        stages.push(("rasterize_backward", ms(t)));
+        let t = Instant::now();
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        self.backward
+            .encode_project(&ctx.device, &mut encoder, &state, buffers);
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait_idle()?;
+        stages.push(("project_backward", ms(t)));
+        let n = splats.len();
+        let t = Instant::now();
+        readback::read_f32(&ctx, &buffers.param_grads, n * PARAM_FLOATS)?;
+        readback::read_f32(&ctx, &buffers.v_sh, n * splats.sh_coeffs() * 3)?;
+        readback::read_f32(&ctx, &buffers.v_raw_labels, n * splats.label_channels)?;
+        stages.push(("read_grads", ms(t)));
+        Ok(StepProfile {
+            forward_source: forward.source,
+            stages,
+            intersections: forward.intersections,
+        })
+    }
+}
+
 impl RasterBackend for GpuBackend {
     fn name(&self) -> &'static str {
         "gpu"

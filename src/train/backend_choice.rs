@@ -51,8 +51,8 @@ pub fn open_backend(choice: Backend) -> Result<(Box<dyn RasterBackend>, String),
     match choice {
         Backend::Cpu => Ok(cpu()),
         Backend::Gpu => gpu(GpuContext::new()?),
-        Backend::Auto => match GpuContext::new() {
-            Ok(ctx) if !ctx.is_software() => gpu(ctx),
+        Backend::Auto => match GpuContext::new_hardware() {
+            Ok(Some(ctx)) => gpu(ctx),
             _ => Ok(cpu()),
         },
     }

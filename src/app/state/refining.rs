@@ -50,6 +50,8 @@ impl AppState {
             strategy,
             iterations,
             given: Some(given),
+            // A hardware GPU when there is one, as live training.
+            backend: crate::train::backend_choice::Backend::Auto,
             ..RefineConfig::default()
         };
         let options = JobOptions {

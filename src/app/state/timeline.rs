@@ -345,13 +345,15 @@ impl AppState {
             return;
         }
         let unsaved = timeline.loaded.get(&(survey - 1)).is_some_and(|s| s.edited);
-        let config = UpdateConfig::for_project(
+        let mut config = UpdateConfig::for_project(
             &timeline.twin,
             strategy,
             ImageScale::Factor(1),
             iterations,
             true,
         );
+        // A hardware GPU when there is one, as live training.
+        config.refine.backend = crate::train::backend_choice::Backend::Auto;
         let options = JobOptions {
             snapshot_interval: Some(Duration::from_millis(500)),
             low_priority: true,
