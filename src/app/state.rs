@@ -114,6 +114,11 @@ pub struct AppState {
     pub splats: Option<Arc<Splats>>,
     /// Bumped whenever `splats` changes (the renderer re-uploads on change).
     pub splats_generation: u64,
+    /// Bumped whenever what `splats` draws changes (not by selection-only edits): the GPU
+    /// selection pass re-uploads the model then.
+    pub drawn_generation: u64,
+    /// The GPU selection pass on a hardware GPU (None until first used; Some(None): none).
+    gpu_selector: Option<Option<crate::gpu::select::GpuSelector>>,
     pub training: Option<TrainingSession>,
     pub history: History,
     pub snap: Option<Snap>,
@@ -152,6 +157,8 @@ impl AppState {
             scene: None,
             splats: None,
             splats_generation: 0,
+            drawn_generation: 0,
+            gpu_selector: None,
             training: None,
             history: History::default(),
             snap: None,
@@ -194,6 +201,7 @@ impl AppState {
     fn show_edited(&mut self, splats: Arc<Splats>) {
         self.splats = Some(splats);
         self.splats_generation += 1;
+        self.drawn_generation += 1;
     }
 
     /// Survey cameras of the open dataset.

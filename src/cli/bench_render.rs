@@ -38,6 +38,10 @@ pub struct Args {
     /// Skip the CPU reference.
     #[arg(long)]
     pub no_cpu: bool,
+    /// Also time a lasso selection (a 64-point circle over the middle of the view) on the GPU
+    /// selection pass and on the CPU, straight through and front-most.
+    #[arg(long)]
+    pub select: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -136,6 +140,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })
     };
 
+    let selection = if args.select {
+        time_selection(&ctx, &splats, &camera, &cpu_settings, frames, !args.no_cpu)?
+    } else {
+        serde_json::Value::Null
+    };
+
     let report = json!({
         "adapter": ctx.describe(),
         "software_adapter": ctx.is_software(),
@@ -156,9 +166,77 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "intersections": intersections,
         },
         "cpu": cpu,
+        "selection": selection,
     });
     println!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())
+}
+
+/// Milliseconds per lasso selection on the GPU pass and (unless skipped) on the CPU, straight
+/// through and front-most, and whether the two agree.
+fn time_selection(
+    ctx: &GpuContext,
+    splats: &Splats,
+    camera: &Camera,
+    settings: &RenderSettings,
+    frames: usize,
+    with_cpu: bool,
+) -> anyhow::Result<serde_json::Value> {
+    use damage_twin::gpu::select::GpuSelector;
+    use damage_twin::splats::selection::{Shape, hits};
+    let k = camera.intrinsics;
+    let centre = glam::Vec2::new(k.width as f32 / 2.0, k.height as f32 / 2.0);
+    let radius = k.width.min(k.height) as f32 / 3.0;
+    let lasso = Shape::Polygon(
+        (0..64)
+            .map(|i| {
+                let a = i as f32 * std::f32::consts::TAU / 64.0;
+                centre + radius * glam::Vec2::new(a.cos(), a.sin())
+            })
+            .collect(),
+    );
+    let gpu_settings = GpuRenderSettings::from(settings);
+    let mut selector = GpuSelector::new(ctx)?;
+    let upload = Instant::now();
+    let gpu_hits = selector.hits(splats, 1, camera, &lasso, None)?;
+    let first_ms = upload.elapsed().as_secs_f64() * 1e3;
+    let time = |f: &mut dyn FnMut() -> anyhow::Result<Vec<bool>>| -> anyhow::Result<f64> {
+        let t = Instant::now();
+        for _ in 0..frames {
+            f()?;
+        }
+        Ok(t.elapsed().as_secs_f64() * 1e3 / frames as f64)
+    };
+    let straight_ms = time(&mut || Ok(selector.hits(splats, 1, camera, &lasso, None)?))?;
+    let front_ms =
+        time(&mut || Ok(selector.hits(splats, 1, camera, &lasso, Some(&gpu_settings))?))?;
+    let selected = gpu_hits.iter().filter(|&&h| h).count();
+    let cpu = if with_cpu {
+        let cpu_hits = hits(splats, camera, &lasso);
+        let straight = time(&mut || Ok(hits(splats, camera, &lasso)))?;
+        let front = time(&mut || {
+            Ok(damage_twin::damage::pick::front_hits(
+                splats, camera, &lasso, settings,
+            ))
+        })?;
+        json!({
+            "straight_ms": round(straight),
+            "front_most_ms": round(front),
+            "same_selection": cpu_hits == gpu_hits,
+        })
+    } else {
+        serde_json::Value::Null
+    };
+    Ok(json!({
+        "shape": "lasso, 64 points",
+        "selected": selected,
+        "gpu": {
+            "first_ms_with_upload": round(first_ms),
+            "straight_ms": round(straight_ms),
+            "front_most_ms": round(front_ms),
+        },
+        "cpu": cpu,
+    }))
 }
 
 fn round(v: f64) -> f64 {

@@ -15,6 +15,7 @@ pub mod radix_sort;
 pub mod rasterize;
 pub mod readback;
 pub mod renderer;
+pub mod select;
 pub mod splat_buffers;
 pub mod tile_ranges;
 pub mod timing;

@@ -475,6 +475,11 @@ impl GpuRenderer {
         })
     }
 
+    /// The last frame's colour+alpha and depth buffers (the selection pass reads them).
+    pub(super) fn forward_state_frame(&self) -> Option<(&wgpu::Buffer, &wgpu::Buffer)> {
+        self.frame.as_ref().map(|f| (&f.out_color, &f.out_depth))
+    }
+
     /// Reads the last frame's outputs back.
     pub fn read_frame(&self) -> Result<GpuFrame, GpuError> {
         let frame = self

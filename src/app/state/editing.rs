@@ -5,6 +5,7 @@ use std::sync::Arc;
 
 use super::AppState;
 use crate::splats::Splats;
+use crate::splats::model::state::SELECTED;
 use crate::splats::selection::{self, Edit, SetOp};
 
 impl AppState {
@@ -25,9 +26,15 @@ impl AppState {
         if change.is_empty() {
             return;
         }
+        let selection_only = matches!(&change, Edit::Bits { bit, .. } if *bit == SELECTED);
         self.edits.push(change);
         let selected = selection::selected_count(&model);
+        let drawn = self.drawn_generation;
         self.show_model_keeping_measurement(model);
+        if selection_only {
+            // Selection bits do not change what is drawn (the GPU selection pass keeps its copy).
+            self.drawn_generation = drawn;
+        }
         // How long an edit takes on this model (the workbench aims at 100 ms for 100k).
         self.log_line(format!(
             "{selected} selected ({:.0} ms)",

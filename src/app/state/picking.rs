@@ -22,19 +22,51 @@ impl AppState {
     }
 
     /// A screen or volume shape: front-most (by rendered contribution) when the settings say
-    /// so and the shape is on the screen, else straight through.
+    /// so and the shape is on the screen, else straight through. On a hardware GPU the test runs
+    /// in the GPU selection pass (the same rules), on the CPU otherwise or if the GPU fails.
     pub(super) fn select_shape(&mut self, shape: &Shape, camera: &Camera, op: SetOp) {
         let front = self.settings.selection_front_most && shape.screen_bounds().is_some();
         let background = Vec3::from_array(self.settings.background);
+        let on_gpu = self.gpu_hits(shape, camera, front);
         self.edit_model(|m| {
-            let hit = if front {
-                let settings = RenderSettings::new(background, m.sh_degree);
-                front_hits(m, camera, shape, &settings)
-            } else {
-                selection::hits(m, camera, shape)
+            let hit = match on_gpu {
+                Some(hit) => hit,
+                None if front => {
+                    let settings = RenderSettings::new(background, m.sh_degree);
+                    front_hits(m, camera, shape, &settings)
+                }
+                None => selection::hits(m, camera, shape),
             };
             selection::select(m, &hit, op)
         });
+    }
+
+    /// The GPU selection pass's hits, when a hardware GPU is there (created on first use; a
+    /// software driver is slower than the CPU test, so it is never used for this).
+    fn gpu_hits(&mut self, shape: &Shape, camera: &Camera, front: bool) -> Option<Vec<bool>> {
+        let splats = self.splats.clone()?;
+        if self.gpu_selector.is_none() {
+            let selector = match crate::gpu::GpuContext::new_hardware() {
+                Ok(Some(ctx)) => crate::gpu::select::GpuSelector::new(&ctx).ok(),
+                _ => None,
+            };
+            self.gpu_selector = Some(selector);
+        }
+        let settings = crate::gpu::GpuRenderSettings {
+            background: Vec3::from_array(self.settings.background),
+            sh_degree: splats.sh_degree,
+            ..Default::default()
+        };
+        let key = self.drawn_generation;
+        let selector = self.gpu_selector.as_mut()?.as_mut()?;
+        match selector.hits(&splats, key, camera, shape, front.then_some(&settings)) {
+            Ok(hit) => Some(hit),
+            Err(e) => {
+                self.log_line(format!("GPU selection failed ({e}); selecting on the CPU"));
+                self.gpu_selector = Some(None);
+                None
+            }
+        }
     }
 
     pub(super) fn select_at(&mut self, pixel: Vec2, camera: &Camera, how: PointSelect, op: SetOp) {
