@@ -3,6 +3,7 @@
 //! project), each tested against it. Host launch code lives here, one file per stage; no UI code.
 //! The viewer's forward never reads back; the trainer's backend ([`GpuBackend`]) does, per step.
 
+pub mod adam;
 pub mod backward;
 pub mod context;
 mod count_probe;

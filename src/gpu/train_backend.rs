@@ -23,7 +23,12 @@ pub struct GpuBackend {
     radii: Vec<u32>,
     timings: StageTimings,
     fault: Option<String>,
+    /// Adam's moments on the GPU, once the trainer keeps the model here (`resident`).
+    adam: Option<super::adam::GpuAdam>,
 }
+
+#[path = "resident.rs"]
+mod resident;
 
 impl GpuBackend {
     /// Float atomics accumulate the gradients where the device has them, a compare-and-swap
@@ -50,6 +55,7 @@ impl GpuBackend {
             radii: Vec::new(),
             timings: StageTimings::default(),
             fault: None,
+            adam: None,
         })
     }
 
@@ -77,6 +83,16 @@ impl GpuBackend {
         let t = Instant::now();
         self.renderer.upload(splats)?;
         self.timings.project = t.elapsed();
+        self.render_and_read(camera, settings, out)
+    }
+
+    /// Renders the uploaded model and reads the frame back into `out`.
+    pub(super) fn render_and_read(
+        &mut self,
+        camera: &Camera,
+        settings: &RenderSettings,
+        out: &mut RenderOutput,
+    ) -> Result<(), GpuError> {
         let t = Instant::now();
         self.renderer
             .render_blocking(camera, &GpuRenderSettings::from(settings))?;
@@ -103,38 +119,11 @@ impl GpuBackend {
         let n = splats.len();
         let l = splats.label_channels;
         let sh_floats = splats.sh_coeffs() * 3;
-        let pixels = v_out.color.len() / 3;
-        let stride = PIXEL_FLOATS + l;
-        self.packed.clear();
-        self.packed.resize(pixels * stride, 0.0);
-        for (p, cell) in self.packed.chunks_exact_mut(stride).enumerate() {
-            cell[..3].copy_from_slice(&v_out.color[p * 3..p * 3 + 3]);
-            cell[3] = v_out.alpha.map_or(0.0, |a| a[p]);
-            cell[4] = v_out.depth.map_or(0.0, |d| d[p]);
-            if let Some(labels) = v_out.labels {
-                cell[PIXEL_FLOATS..].copy_from_slice(&labels[p * l..(p + 1) * l]);
-            }
-        }
-        let capacity = self.renderer.splat_buffers().capacity().max(1);
-        if !self
-            .buffers
-            .as_ref()
-            .is_some_and(|b| b.fits(capacity, pixels, l, sh_floats))
-        {
-            self.buffers = Some(BackwardBuffers::new(
-                &ctx.device,
-                capacity,
-                pixels,
-                l,
-                sh_floats,
-            ));
-        }
+        self.upload_pixel_grads(v_out)?;
         let buffers = self
             .buffers
             .as_ref()
             .ok_or(GpuError::Device("backward buffers missing".into()))?;
-        ctx.queue
-            .write_buffer(&buffers.v_pixels, 0, bytemuck::cast_slice(&self.packed));
         let forward = self
             .renderer
             .forward_state()
@@ -169,6 +158,47 @@ impl GpuBackend {
         grads.v_sh.copy_from_slice(&v_sh);
         grads.v_raw_labels.copy_from_slice(&v_raw_labels);
         self.timings.project_backward = t.elapsed();
+        Ok(())
+    }
+
+    /// Packs and uploads the pixel gradients, sizing the backward buffers for the uploaded model.
+    pub(super) fn upload_pixel_grads(&mut self, v_out: &PixelGrads) -> Result<(), GpuError> {
+        let ctx = self.renderer.context().clone();
+        let model = self.renderer.splat_buffers();
+        let l = model.label_channels();
+        let sh_floats = crate::splats::model::sh_coeffs_for_degree(model.sh_degree()) * 3;
+        let pixels = v_out.color.len() / 3;
+        let stride = PIXEL_FLOATS + l;
+        self.packed.clear();
+        self.packed.resize(pixels * stride, 0.0);
+        for (p, cell) in self.packed.chunks_exact_mut(stride).enumerate() {
+            cell[..3].copy_from_slice(&v_out.color[p * 3..p * 3 + 3]);
+            cell[3] = v_out.alpha.map_or(0.0, |a| a[p]);
+            cell[4] = v_out.depth.map_or(0.0, |d| d[p]);
+            if let Some(labels) = v_out.labels {
+                cell[PIXEL_FLOATS..].copy_from_slice(&labels[p * l..(p + 1) * l]);
+            }
+        }
+        let capacity = self.renderer.splat_buffers().capacity().max(1);
+        if !self
+            .buffers
+            .as_ref()
+            .is_some_and(|b| b.fits(capacity, pixels, l, sh_floats))
+        {
+            self.buffers = Some(BackwardBuffers::new(
+                &ctx.device,
+                capacity,
+                pixels,
+                l,
+                sh_floats,
+            ));
+        }
+        let buffers = self
+            .buffers
+            .as_ref()
+            .ok_or(GpuError::Device("backward buffers missing".into()))?;
+        ctx.queue
+            .write_buffer(&buffers.v_pixels, 0, bytemuck::cast_slice(&self.packed));
         Ok(())
     }
 }
@@ -312,5 +342,9 @@ impl RasterBackend for GpuBackend {
 
     fn fault(&self) -> Option<&str> {
         self.fault.as_deref()
+    }
+
+    fn as_any_mut(&mut self) -> Option<&mut dyn std::any::Any> {
+        Some(self)
     }
 }

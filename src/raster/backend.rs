@@ -52,6 +52,12 @@ pub trait RasterBackend: Send {
     fn fault(&self) -> Option<&str> {
         None
     }
+
+    /// The backend as `Any`, for a trainer that drives a known backend beyond this trait (the
+    /// GPU backend keeps the model and optimiser on the device). None: only this trait.
+    fn as_any_mut(&mut self) -> Option<&mut dyn std::any::Any> {
+        None
+    }
 }
 
 impl RasterBackend for Rasterizer {

@@ -399,6 +399,39 @@ impl Adam {
         (&mom.m, &mom.v)
     }
 
+    /// Counts one step of every enabled group without touching moments or parameters (a GPU
+    /// step applies it) and returns per group its bias corrections `(1 - β1^t, sqrt(1 - β2^t))`
+    /// this step, None for a group switched off: the same counts `step` keeps.
+    pub fn advance(&mut self, groups: &GroupFlags) -> [Option<(f32, f32)>; 7] {
+        let (beta1, beta2) = (self.beta1, self.beta2);
+        std::array::from_fn(|gi| {
+            if !groups.0[gi] {
+                return None;
+            }
+            let mom = &mut self.groups[gi];
+            mom.step += 1;
+            let t = mom.step as i32;
+            Some((1.0 - beta1.powi(t), (1.0 - beta2.powi(t)).sqrt()))
+        })
+    }
+
+    /// Replaces a group's moments (from a GPU step); the lengths must match.
+    pub fn set_moments(&mut self, g: ParamGroup, m: Vec<f32>, v: Vec<f32>) -> Result<(), String> {
+        let mom = &mut self.groups[g.index()];
+        if m.len() != mom.m.len() || v.len() != mom.v.len() {
+            return Err(format!(
+                "{} moments: {} and {} values for {}",
+                g.name(),
+                m.len(),
+                v.len(),
+                mom.m.len()
+            ));
+        }
+        mom.m = m;
+        mom.v = v;
+        Ok(())
+    }
+
     /// Zeroes the moments of one Gaussian in one group.
     pub fn reset_gaussian(&mut self, g: ParamGroup, gaussian: usize) {
         let mom = &mut self.groups[g.index()];

@@ -161,6 +161,34 @@ impl Densifier {
         }
     }
 
+    /// Adds statistics gathered elsewhere (the GPU's Adam kernel does `accumulate`'s sums).
+    pub fn add_stats(&mut self, grad_accum: &[f32], visible_count: &[u32], max_radii: &[f32]) {
+        assert_eq!(
+            grad_accum.len(),
+            self.grad_accum.len(),
+            "densify stats length"
+        );
+        for (g, ((&grad, &count), &radius)) in grad_accum
+            .iter()
+            .zip(visible_count)
+            .zip(max_radii)
+            .enumerate()
+        {
+            self.grad_accum[g] += grad;
+            self.visible_count[g] += count;
+            self.max_radii[g] = self.max_radii[g].max(radius);
+        }
+    }
+
+    /// Whether `after_step(step, ..)` changes anything (densifies, prunes or resets opacity).
+    pub fn due(&self, step: u32) -> bool {
+        let c = &self.config;
+        step < c.stop
+            && ((step > c.start && c.every > 0 && step.is_multiple_of(c.every))
+                || (c.opacity_reset_every > 0 && step.is_multiple_of(c.opacity_reset_every))
+                || (c.reset_opacity_at_start && step == c.start))
+    }
+
     /// Mean gradient norm per Gaussian over the steps it was visible (0 if never).
     pub fn mean_grads(&self) -> Vec<f32> {
         self.grad_accum

@@ -131,7 +131,10 @@ pub fn run_training(
             cancelled = true;
             break;
         }
-        ctx.snapshot_every(|| trainer.splats().clone());
+        ctx.snapshot_every(|| {
+            trainer.sync();
+            trainer.splats().clone()
+        });
     }
 
     let started = Instant::now();

@@ -12,14 +12,14 @@ use crate::raster::{
     PixelGrads, RasterBackend, Rasterizer, RenderOutput, RenderSettings, SplatGrads,
 };
 use crate::scene::Mask;
-use crate::splats::{MAX_LABEL_CHANNELS, Splats};
+use crate::splats::Splats;
 use crate::train::adam::{Adam, GroupFlags, LearningRates, ParamGrads};
 use crate::train::appearance::AppearanceModel;
 use crate::train::densify::{Densifier, camera_extent};
 use crate::train::evaluate::{EvalScores, evaluate_with};
 use crate::train::guards::first_non_finite_param;
 use crate::train::importance::{importance, prune_to};
-use crate::train::loss::{LabelLossParams, LossWorkspace, label_loss, photometric_loss};
+use crate::train::loss::{LabelLossParams, LossWorkspace};
 use crate::train::scale_cap::ScaleCap;
 use crate::train::schedule::sh_degree_for_step;
 use crate::train::spec::{TrainSpec, TrainView};
@@ -126,6 +126,11 @@ struct Checkpoint {
 /// the drift it removes is slow, and each pin rescales every SH coefficient.
 const APPEARANCE_RECENTRE_EVERY: u32 = 100;
 
+#[path = "resident.rs"]
+mod resident;
+#[path = "step_loss.rs"]
+mod step_loss;
+
 /// One training run in progress.
 pub struct Trainer {
     spec: TrainSpec,
@@ -163,6 +168,10 @@ pub struct Trainer {
     /// Frozen flags of the input model by Gaussian id, restored when the run ends (the run's own
     /// trainable mask travels in `meta.frozen` through densification).
     input_frozen: Option<HashMap<u64, bool>>,
+    /// Set when the model lives on the GPU between syncs (`resident.rs`).
+    resident: Option<resident::Resident>,
+    /// The loss of the last GPU-resident step.
+    last_loss: f32,
 }
 
 impl Trainer {
@@ -181,7 +190,7 @@ impl Trainer {
         spec: TrainSpec,
         mut splats: Splats,
         views: Vec<TrainView>,
-        backend: Box<dyn RasterBackend>,
+        mut backend: Box<dyn RasterBackend>,
     ) -> Result<Trainer, TrainError> {
         splats.check_lengths().map_err(TrainError::Splats)?;
         if let Some(what) = first_non_finite_param(&splats) {
@@ -266,7 +275,10 @@ impl Trainer {
             densifier: densifier.clone(),
         };
         let rng = fastrand::Rng::with_seed(spec.seed);
+        let resident = resident::can_be_resident(&spec, &mut backend).then(resident::Resident::new);
         Ok(Trainer {
+            resident,
+            last_loss: f32::NAN,
             regions,
             tiles,
             rasterizer: backend,
@@ -305,7 +317,10 @@ impl Trainer {
 
     /// Why the renderer stopped working, if it did (see `RasterBackend::fault`).
     pub fn renderer_fault(&self) -> Option<&str> {
-        self.rasterizer.fault()
+        self.resident
+            .as_ref()
+            .and_then(|r| r.fault())
+            .or(self.rasterizer.fault())
     }
 
     pub fn total_steps(&self) -> u32 {
@@ -328,6 +343,7 @@ impl Trainer {
         &self.spec
     }
 
+    /// The model; in a GPU-resident run, as of the last `sync` (its count is always current).
     pub fn splats(&self) -> &Splats {
         &self.splats
     }
@@ -361,6 +377,7 @@ impl Trainer {
 
     /// The trained model, with the input's frozen flags restored.
     pub fn into_splats(mut self) -> Splats {
+        self.sync();
         if let Some(saved) = &self.input_frozen {
             for (frozen, id) in self
                 .splats
@@ -389,10 +406,12 @@ impl Trainer {
 
     /// One optimisation step on the next view.
     pub fn step(&mut self) -> StepReport {
+        if self.resident.is_some() {
+            return self.step_resident();
+        }
         let step = self.steps_done + 1;
         let started = Instant::now();
         let view_index = self.next_view();
-        let view = &self.views[view_index];
         let settings = RenderSettings::new(
             self.spec.background,
             sh_degree_for_step(
@@ -406,8 +425,12 @@ impl Trainer {
         let t = Instant::now();
         self.rasterizer
             .set_active_tiles(self.tiles[view_index].as_deref());
-        self.rasterizer
-            .forward(&self.splats, &view.camera, &settings, &mut self.out);
+        self.rasterizer.forward(
+            &self.splats,
+            &self.views[view_index].camera,
+            &settings,
+            &mut self.out,
+        );
         self.timings.forward += t.elapsed().as_secs_f64();
         let parts = self.rasterizer.timings();
         self.timings.project += parts.project.as_secs_f64();
@@ -416,67 +439,7 @@ impl Trainer {
 
         // Loss and its gradient w.r.t. the render.
         let t = Instant::now();
-        let region = self.regions[view_index].as_deref();
-        let targets = self.spec.targets;
-        self.v_color.resize(self.out.color.len(), 0.0);
-        let mut loss = 0.0f32;
-        if targets.rgb_weight > 0.0 {
-            // Through the photo's light, when it is learnt: the loss compares that with the photo.
-            let appearance = self.appearance.as_mut().filter(|a| a.active_at(step));
-            let mut lit = std::mem::take(&mut self.lit_color);
-            if let Some(appearance) = &appearance {
-                appearance.apply(view_index, &self.out.color, &mut lit);
-            }
-            let rendered = if appearance.is_some() {
-                lit.as_slice()
-            } else {
-                self.out.color.as_slice()
-            };
-            let photometric = photometric_loss(
-                &mut self.loss_ws,
-                rendered,
-                &view.image.data,
-                view.image.width,
-                view.image.height,
-                region,
-                targets.ssim_lambda,
-                &mut self.v_color,
-            );
-            loss += targets.rgb_weight * photometric.loss;
-            if targets.rgb_weight != 1.0 {
-                self.v_color
-                    .iter_mut()
-                    .for_each(|v| *v *= targets.rgb_weight);
-            }
-            self.lit_color = lit;
-            if let Some(appearance) = appearance {
-                loss +=
-                    appearance.backward_and_step(view_index, &self.out.color, &mut self.v_color);
-            }
-        } else {
-            self.v_color.fill(0.0);
-        }
-        let labels_on = targets.label_weight > 0.0
-            && self.splats.label_channels > 0
-            && view.labels.len() == self.splats.label_channels
-            && self.splats.label_channels <= MAX_LABEL_CHANNELS;
-        if labels_on {
-            self.v_labels.resize(self.out.labels.len(), 0.0);
-            let masks: [Option<&[u8]>; MAX_LABEL_CHANNELS] =
-                std::array::from_fn(|k| view.labels.get(k).map(|m| m.data.as_slice()));
-            let label = label_loss(
-                &self.out.labels,
-                self.splats.label_channels,
-                &masks[..self.splats.label_channels],
-                region,
-                &self.label_params,
-                &mut self.v_labels,
-            );
-            loss += targets.label_weight * label;
-            self.v_labels
-                .iter_mut()
-                .for_each(|v| *v *= targets.label_weight);
-        }
+        let (loss, labels_on) = self.render_loss(view_index, step);
         self.timings.loss += t.elapsed().as_secs_f64();
         if !loss.is_finite() {
             return self.roll_back(step, started, format!("loss is {loss}"));
@@ -492,7 +455,7 @@ impl Trainer {
         };
         self.rasterizer.backward(
             &self.splats,
-            &view.camera,
+            &self.views[view_index].camera,
             &settings,
             &v_out,
             &mut self.grads,
@@ -632,6 +595,7 @@ impl Trainer {
 
     /// Mean PSNR and SSIM of the current model over `views`, at the current SH degree.
     pub fn evaluate(&mut self, views: &[TrainView]) -> EvalScores {
+        self.sync();
         self.rasterizer.set_active_tiles(None);
         let settings = RenderSettings::new(self.spec.background, self.active_sh_degree());
         evaluate_with(

@@ -1,0 +1,137 @@
+//! `GpuBackend` keeping the model on the GPU between steps ("resident" training): the trainer
+//! uploads the model and Adam's moments after it changed them on the CPU, then each step renders
+//! the uploaded model, runs both backward kernels and Adam on the GPU and reads back only the
+//! frame (for the loss) and a 4-byte non-finite flag; it downloads the model, moments and
+//! density statistics when density control, a checkpoint or a snapshot needs them.
+
+use std::time::Instant;
+
+use super::GpuBackend;
+use crate::gpu::adam::{DensifyStats, GROUPS, GpuAdam, GroupStep, Moments};
+use crate::gpu::{GpuError, readback};
+use crate::raster::{PixelGrads, RenderOutput, RenderSettings};
+use crate::scene::Camera;
+use crate::splats::Splats;
+
+impl GpuBackend {
+    /// Uploads the model, Adam's moments (per group `(m, v)` in `train::adam`'s layout) and
+    /// the frozen flags; density statistics start at zero.
+    pub fn upload_resident(
+        &mut self,
+        splats: &Splats,
+        moments: [(&[f32], &[f32]); GROUPS],
+        frozen: &[bool],
+    ) -> Result<(), GpuError> {
+        let t = Instant::now();
+        self.renderer.upload(splats)?;
+        let ctx = self.renderer.context().clone();
+        let adam = self.adam.get_or_insert_with(|| GpuAdam::new(&ctx));
+        adam.upload(&ctx, self.renderer.splat_buffers(), moments, frozen)?;
+        self.timings.project = t.elapsed();
+        Ok(())
+    }
+
+    /// Renders the uploaded model from `camera` and reads the frame back.
+    pub fn forward_resident(
+        &mut self,
+        camera: &Camera,
+        settings: &RenderSettings,
+        out: &mut RenderOutput,
+    ) -> Result<(), GpuError> {
+        self.timings.project = std::time::Duration::ZERO;
+        self.render_and_read(camera, settings, out)
+    }
+
+    /// The backward of the last forward and one Adam step of the uploaded model, on the GPU;
+    /// returns the non-finite bits (`GpuAdam::take_non_finite`: 0 when all is well).
+    pub fn step_resident(
+        &mut self,
+        v_out: &PixelGrads,
+        groups: &[GroupStep; GROUPS],
+        betas: (f32, f32, f32),
+    ) -> Result<u32, GpuError> {
+        let t = Instant::now();
+        self.upload_pixel_grads(v_out)?;
+        let ctx = self.renderer.context().clone();
+        let (Some(buffers), Some(adam), Some(forward)) = (
+            self.buffers.as_ref(),
+            self.adam.as_ref(),
+            self.renderer.forward_state(),
+        ) else {
+            return Err(GpuError::Device(
+                "a resident step needs an uploaded model and a forward first".into(),
+            ));
+        };
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        self.backward
+            .encode_rasterize(&ctx.device, &mut encoder, &forward, buffers);
+        self.backward
+            .encode_project(&ctx.device, &mut encoder, &forward, buffers);
+        adam.encode_step(
+            &ctx,
+            &mut encoder,
+            self.renderer.splat_buffers(),
+            buffers,
+            groups,
+            betas,
+        )?;
+        ctx.queue.submit([encoder.finish()]);
+        let bits = adam.take_non_finite(&ctx)?;
+        // One submission: the whole backward and the optimiser are timed together.
+        self.timings.raster_backward = t.elapsed();
+        self.timings.project_backward = std::time::Duration::ZERO;
+        Ok(bits)
+    }
+
+    /// Reads the uploaded model back into `splats` (same count and shape) and returns Adam's
+    /// moments.
+    pub fn download_resident(&mut self, splats: &mut Splats) -> Result<Moments, GpuError> {
+        let ctx = self.renderer.context().clone();
+        let model = self.renderer.splat_buffers();
+        let n = model.len();
+        if splats.len() != n || splats.label_channels != model.label_channels() {
+            return Err(GpuError::InvalidSplats(format!(
+                "downloading {n} Gaussians into a model of {}",
+                splats.len()
+            )));
+        }
+        let layout = model.layout();
+        let geometry =
+            readback::read_f32(&ctx, model.geometry(), layout.opacities_at as usize + n)?;
+        let section = |at: u32, per: usize| &geometry[at as usize..at as usize + n * per];
+        splats
+            .means
+            .copy_from_slice(bytemuck::cast_slice(section(0, 3)));
+        splats
+            .log_scales
+            .copy_from_slice(bytemuck::cast_slice(section(layout.log_scales_at, 3)));
+        // Element by element: a Quat may be 16-byte aligned, a slice of f32s is not.
+        for (q, c) in splats
+            .rotations
+            .iter_mut()
+            .zip(section(layout.rotations_at, 4).chunks_exact(4))
+        {
+            *q = glam::Quat::from_xyzw(c[0], c[1], c[2], c[3]);
+        }
+        splats
+            .raw_opacities
+            .copy_from_slice(section(layout.opacities_at, 1));
+        let sh = readback::read_f32(&ctx, model.sh(), splats.sh.len())?;
+        splats.sh.copy_from_slice(&sh);
+        let labels = readback::read_f32(&ctx, model.raw_labels(), splats.raw_labels.len())?;
+        splats.raw_labels.copy_from_slice(&labels);
+        self.adam
+            .as_ref()
+            .ok_or(GpuError::Readback("no Adam state uploaded".into()))?
+            .download(&ctx, model)
+    }
+
+    /// Density control's statistics since the last upload or take, zeroed after reading.
+    pub fn take_densify_stats(&mut self) -> Result<DensifyStats, GpuError> {
+        let ctx = self.renderer.context().clone();
+        self.adam
+            .as_mut()
+            .ok_or(GpuError::Readback("no Adam state uploaded".into()))?
+            .take_stats(&ctx)
+    }
+}

@@ -1,0 +1,298 @@
+//! GPU-resident steps: with the GPU backend the model and Adam's moments stay on the device
+//! between syncs. A step renders the uploaded model, computes the loss on the CPU from the frame
+//! (the trainer's own loss code), then runs the backward kernels and Adam on the GPU and reads
+//! back only a non-finite flag. The CPU model, moments and density statistics are brought up to
+//! date (synced) when density control, importance pruning or a checkpoint is due, at the end,
+//! and when a caller asks (`Trainer::sync`: snapshots, evaluation); whatever the CPU then
+//! changes is uploaded before the next step. The schedule, the loss, density control, the
+//! rollback and the checkpoints are the CPU step's; per-step clamps the GPU does not do (the
+//! scale cap) and the per-photo light (folded into the colours every 100 steps) keep a run on
+//! the per-step path (`GpuBackend` as a plain `RasterBackend`).
+
+use std::time::Instant;
+
+use super::{CHECKPOINT_EVERY, StepReport, Trainer};
+use crate::gpu::adam::{GROUPS, GroupStep};
+use crate::gpu::{GpuBackend, GpuError};
+use crate::raster::{PixelGrads, RasterBackend, RenderSettings};
+use crate::train::adam::ParamGroup;
+use crate::train::guards::first_non_finite_param;
+use crate::train::schedule::sh_degree_for_step;
+
+/// Where a GPU-resident run stands.
+pub(super) struct Resident {
+    /// The CPU model or moments changed since the last upload (start, density control,
+    /// rollback).
+    dirty: bool,
+    /// The GPU model moved since the last download.
+    stale: bool,
+    /// The first GPU error (the run must end).
+    fault: Option<String>,
+}
+
+impl Resident {
+    pub(super) fn new() -> Resident {
+        Resident {
+            dirty: true,
+            stale: false,
+            fault: None,
+        }
+    }
+
+    pub(super) fn fault(&self) -> Option<&str> {
+        self.fault.as_deref()
+    }
+}
+
+fn gpu_of(backend: &mut Box<dyn RasterBackend>) -> Result<&mut GpuBackend, GpuError> {
+    backend
+        .as_any_mut()
+        .and_then(|any| any.downcast_mut::<GpuBackend>())
+        .ok_or(GpuError::Device(
+            "the resident step needs the GPU backend".into(),
+        ))
+}
+
+/// Whether a run of `spec` on `backend` can keep its model on the GPU.
+pub(super) fn can_be_resident(
+    spec: &crate::train::spec::TrainSpec,
+    backend: &mut Box<dyn RasterBackend>,
+) -> bool {
+    gpu_of(backend).is_ok() && spec.max_scale_growth.is_none() && spec.appearance.is_none()
+}
+
+impl Trainer {
+    /// Whether the model lives on the GPU between syncs.
+    pub fn is_gpu_resident(&self) -> bool {
+        self.resident.is_some()
+    }
+
+    /// Keeps the model on the CPU and moves it every step even on the GPU backend (the
+    /// per-step path: for comparisons). Syncs first.
+    pub fn leave_gpu_resident(&mut self) {
+        self.sync();
+        self.resident = None;
+    }
+
+    /// Brings the CPU model (`splats()`), Adam's moments and the density statistics up to date
+    /// with the GPU in a GPU-resident run; nothing otherwise. A GPU error is kept as the
+    /// renderer's fault.
+    pub fn sync(&mut self) {
+        if let Err(e) = self.try_sync() {
+            self.note_gpu_fault(e);
+        }
+    }
+
+    fn note_gpu_fault(&mut self, e: GpuError) {
+        if let Some(r) = &mut self.resident {
+            r.fault.get_or_insert(format!("GPU: {e}"));
+        }
+    }
+
+    fn try_sync(&mut self) -> Result<(), GpuError> {
+        if !self.resident.as_ref().is_some_and(|r| r.stale) {
+            return Ok(());
+        }
+        let gpu = gpu_of(&mut self.rasterizer)?;
+        let moments = gpu.download_resident(&mut self.splats)?;
+        let stats = gpu.take_densify_stats()?;
+        for ((m, v), group) in moments.into_iter().zip(ParamGroup::ALL) {
+            self.adam
+                .set_moments(group, m, v)
+                .map_err(GpuError::InvalidSplats)?;
+        }
+        if let Some(densifier) = &mut self.densifier {
+            densifier.add_stats(&stats.grad_accum, &stats.visible_count, &stats.max_radii);
+        }
+        if let Some(r) = &mut self.resident {
+            r.stale = false;
+        }
+        Ok(())
+    }
+
+    fn upload_if_dirty(&mut self) -> Result<(), GpuError> {
+        if !self.resident.as_ref().is_some_and(|r| r.dirty) {
+            return Ok(());
+        }
+        let moments: [(&[f32], &[f32]); GROUPS] =
+            std::array::from_fn(|g| self.adam.moments(ParamGroup::ALL[g]));
+        gpu_of(&mut self.rasterizer)?.upload_resident(
+            &self.splats,
+            moments,
+            &self.splats.meta.frozen,
+        )?;
+        if let Some(r) = &mut self.resident {
+            r.dirty = false;
+            r.stale = false;
+        }
+        Ok(())
+    }
+
+    /// The checkpoint back in place of a model the GPU damaged (non-finite values on the
+    /// device); uploaded again before the next step.
+    fn restore_checkpoint(&mut self, step: u32, started: Instant, reason: String) -> StepReport {
+        self.splats.clone_from(&self.checkpoint.splats);
+        self.adam.clone_from(&self.checkpoint.adam);
+        self.densifier.clone_from(&self.checkpoint.densifier);
+        if let Some(r) = &mut self.resident {
+            r.dirty = true;
+            r.stale = false;
+        }
+        self.steps_done = step;
+        self.timings.total += started.elapsed().as_secs_f64();
+        StepReport {
+            step,
+            loss: f32::NAN,
+            rolled_back: Some(format!(
+                "{reason}; model restored to step {}",
+                self.checkpoint_step
+            )),
+        }
+    }
+
+    /// One optimisation step with the model on the GPU.
+    pub(super) fn step_resident(&mut self) -> StepReport {
+        let step = self.steps_done + 1;
+        let started = Instant::now();
+        let view_index = self.next_view();
+        let settings = RenderSettings::new(
+            self.spec.background,
+            sh_degree_for_step(
+                step,
+                self.spec.sh_degree.min(self.splats.sh_degree),
+                self.spec.sh_ramp_every,
+            ),
+        );
+        match self.resident_gpu_work(step, view_index, &settings, started) {
+            Ok(Some(report)) => return report,
+            Ok(None) => {}
+            Err(e) => {
+                self.note_gpu_fault(e);
+                self.steps_done = step;
+                return StepReport {
+                    step,
+                    loss: f32::NAN,
+                    rolled_back: None,
+                };
+            }
+        }
+        let loss = self.last_loss;
+
+        // Density control and checkpoints on the CPU, when due (they need the model there).
+        let t = Instant::now();
+        let densify_due = self.densifier.as_ref().is_some_and(|d| d.due(step));
+        let prune = self.importance_prune_due(step);
+        let checkpoint_due = step - self.checkpoint_step >= CHECKPOINT_EVERY;
+        let mut changed = false;
+        if densify_due || prune.is_some() || checkpoint_due || step >= self.spec.iterations {
+            if let Err(e) = self.try_sync() {
+                self.note_gpu_fault(e);
+                self.steps_done = step;
+                return StepReport {
+                    step,
+                    loss,
+                    rolled_back: None,
+                };
+            }
+            if let Some(densifier) = &mut self.densifier {
+                let report =
+                    densifier.after_step(step, &mut self.splats, &mut self.adam, self.extent);
+                changed = report.densified || report.opacity_reset;
+            }
+            if let Some(keep) = prune {
+                self.prune_by_importance(keep);
+                changed = true;
+            }
+        }
+        if changed && let Some(r) = &mut self.resident {
+            r.dirty = true;
+        }
+        self.timings.densify += t.elapsed().as_secs_f64();
+
+        self.steps_done = step;
+        if changed || checkpoint_due {
+            let t = Instant::now();
+            let bad = first_non_finite_param(&self.splats);
+            self.timings.checks += t.elapsed().as_secs_f64();
+            if let Some(what) = bad {
+                return self.restore_checkpoint(step, started, format!("{what} became non-finite"));
+            }
+            let t = Instant::now();
+            self.take_checkpoint();
+            self.timings.checks += t.elapsed().as_secs_f64();
+        }
+        self.timings.total += started.elapsed().as_secs_f64();
+        StepReport {
+            step,
+            loss,
+            rolled_back: None,
+        }
+    }
+
+    /// Upload if needed, forward, loss, backward and Adam: Some(report) when the step is
+    /// rolled back, the loss left in `last_loss` otherwise.
+    fn resident_gpu_work(
+        &mut self,
+        step: u32,
+        view_index: usize,
+        settings: &RenderSettings,
+        started: Instant,
+    ) -> Result<Option<StepReport>, GpuError> {
+        self.upload_if_dirty()?;
+        let t = Instant::now();
+        let camera = self.views[view_index].camera;
+        gpu_of(&mut self.rasterizer)?.forward_resident(&camera, settings, &mut self.out)?;
+        self.timings.forward += t.elapsed().as_secs_f64();
+        self.timings.rasterize += t.elapsed().as_secs_f64();
+
+        let t = Instant::now();
+        let (loss, labels_on) = self.render_loss(view_index, step);
+        self.timings.loss += t.elapsed().as_secs_f64();
+        if !loss.is_finite() {
+            // Nothing on the GPU moved yet: skip the step.
+            self.steps_done = step;
+            self.timings.total += started.elapsed().as_secs_f64();
+            return Ok(Some(StepReport {
+                step,
+                loss: f32::NAN,
+                rolled_back: Some(format!("loss is {loss}; step skipped")),
+            }));
+        }
+
+        let t = Instant::now();
+        let lrs = self.lrs.for_step(step, self.extent);
+        let bias = self.adam.advance(&self.groups);
+        let groups: [GroupStep; GROUPS] = std::array::from_fn(|g| match bias[g] {
+            Some((bias1, bias2_sqrt)) => GroupStep {
+                step_size: lrs[g] / bias1,
+                inv_bias2_sqrt: 1.0 / bias2_sqrt,
+                on: true,
+            },
+            None => GroupStep::default(),
+        });
+        let betas = (self.adam.beta1, self.adam.beta2, self.adam.eps);
+        let v_out = PixelGrads {
+            color: &self.v_color,
+            alpha: None,
+            depth: None,
+            labels: labels_on.then_some(self.v_labels.as_slice()),
+        };
+        let bits = gpu_of(&mut self.rasterizer)?.step_resident(&v_out, &groups, betas)?;
+        self.timings.backward += t.elapsed().as_secs_f64();
+        self.timings.rasterize_backward += t.elapsed().as_secs_f64();
+        if let Some(r) = &mut self.resident {
+            r.stale = true;
+        }
+        if bits != 0 {
+            let group = ParamGroup::ALL[(bits.trailing_zeros() % 8) as usize];
+            let what = if bits & 0xff != 0 {
+                format!("gradient of {} is not finite", group.name())
+            } else {
+                format!("{} became non-finite", group.name())
+            };
+            return Ok(Some(self.restore_checkpoint(step, started, what)));
+        }
+        self.last_loss = loss;
+        Ok(None)
+    }
+}
