@@ -5,6 +5,7 @@
 // statistics for visible Gaussians (`Densifier::accumulate`: |v_mean2d| sum, count, largest
 // radius) and ORs a bit per group into word 0 when a gradient it applied (bit g) or a parameter
 // it wrote (bit 8 + g) is not finite, so the host reads 4 bytes a step instead of the model.
+// `common.wgsl` is prepended for `is_finite`.
 
 struct AdamUniforms {
     // Per group (means, log_scales, rotations, raw_opacities, sh_dc, sh_rest, raw_labels):
@@ -46,10 +47,6 @@ const STATS_FLOATS: u32 = 4u;
 // count, largest radius (f32 bits), frozen (nonzero). Atomic only for word 0's OR; the rest is
 // each thread's own and loaded and stored plainly.
 @group(0) @binding(8) var<storage, read_write> stats: array<atomic<u32>>;
-
-fn is_finite(x: f32) -> bool {
-    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
-}
 
 var<private> bad: u32;
 

@@ -16,7 +16,6 @@ use crate::gpu::adam::{GROUPS, GroupStep};
 use crate::gpu::{GpuBackend, GpuError};
 use crate::raster::{PixelGrads, RasterBackend, RenderSettings};
 use crate::train::adam::ParamGroup;
-use crate::train::guards::first_non_finite_param;
 use crate::train::schedule::sh_degree_for_step;
 
 /// Where a GPU-resident run stands.
@@ -210,16 +209,10 @@ impl Trainer {
         self.timings.densify += t.elapsed().as_secs_f64();
 
         self.steps_done = step;
-        if changed || checkpoint_due {
-            let t = Instant::now();
-            let bad = first_non_finite_param(&self.splats);
-            self.timings.checks += t.elapsed().as_secs_f64();
-            if let Some(what) = bad {
-                return self.restore_checkpoint(step, started, format!("{what} became non-finite"));
-            }
-            let t = Instant::now();
-            self.take_checkpoint();
-            self.timings.checks += t.elapsed().as_secs_f64();
+        if (changed || checkpoint_due)
+            && let Some(what) = self.scan_and_checkpoint()
+        {
+            return self.restore_checkpoint(step, started, format!("{what} became non-finite"));
         }
         self.timings.total += started.elapsed().as_secs_f64();
         StepReport {

@@ -518,18 +518,10 @@ impl Trainer {
         self.timings.densify += t.elapsed().as_secs_f64();
 
         self.steps_done = step;
-        if changed || step - self.checkpoint_step >= CHECKPOINT_EVERY {
-            // A full scan before every checkpoint: NaN in Gaussians no step looked at (culled,
-            // or made by density control) never survives into a checkpoint.
-            let t = Instant::now();
-            let bad = first_non_finite_param(&self.splats);
-            self.timings.checks += t.elapsed().as_secs_f64();
-            if let Some(what) = bad {
-                return self.roll_back(step, started, format!("{what} became non-finite"));
-            }
-            let t = Instant::now();
-            self.take_checkpoint();
-            self.timings.checks += t.elapsed().as_secs_f64();
+        if (changed || step - self.checkpoint_step >= CHECKPOINT_EVERY)
+            && let Some(what) = self.scan_and_checkpoint()
+        {
+            return self.roll_back(step, started, format!("{what} became non-finite"));
         }
         self.timings.total += started.elapsed().as_secs_f64();
         StepReport {
@@ -537,6 +529,19 @@ impl Trainer {
             loss,
             rolled_back: None,
         }
+    }
+
+    /// A full scan of the model, then a checkpoint of it: NaN in Gaussians no step looked at
+    /// (culled, or made by density control) never survives into a checkpoint. Returns what was
+    /// not finite instead of checkpointing it.
+    fn scan_and_checkpoint(&mut self) -> Option<&'static str> {
+        let t = Instant::now();
+        let bad = first_non_finite_param(&self.splats);
+        if bad.is_none() {
+            self.take_checkpoint();
+        }
+        self.timings.checks += t.elapsed().as_secs_f64();
+        bad
     }
 
     /// The budget to prune to at `step`: the end of the densification window (or of the run,
