@@ -1,8 +1,8 @@
 //! Training on the GPU backend end to end, on lavapipe in CI: the same tiny scene trained on the
-//! CPU, on the GPU with the model resident there (backward and Adam on the GPU, density control
-//! at syncs) and on the GPU per step (the model and gradients crossing every step, Adam on the
-//! CPU), with density control, ends at the same held-out PSNR; frozen Gaussians stay byte for
-//! byte what they were on the GPU paths too.
+//! CPU, on the GPU with the model resident there (loss, backward and Adam on the GPU, density
+//! control at syncs) and on the GPU per step (the model and gradients crossing every step, loss
+//! and Adam on the CPU), with density control, ends at the same held-out PSNR; frozen Gaussians
+//! stay byte for byte what they were on the GPU paths too.
 
 mod blob_scene;
 mod gpu_support;
@@ -99,11 +99,12 @@ fn frozen_gaussians_stay_put_on_the_gpu() {
     );
 }
 
-/// Adam on the GPU against Adam on the CPU, fed the same GPU gradients: five steps without
-/// density control on the resident path and on the per-step path move the parameters the same
-/// way (measured: all 6,900 values within 1e-5 of the largest move). Near-zero gradients may
-/// differ in their last bits with summation order, and Adam's first steps turn a gradient's
-/// sign into a full step, so 1 % of values may differ.
+/// The loss and Adam on the GPU against the loss and Adam on the CPU around the same GPU
+/// backward: five steps without density control on the resident path (loss on the GPU, then on
+/// the CPU) and on the per-step path move the parameters the same way (measured: all 6,900
+/// values within 1e-5 of the largest move, both ways). Near-zero gradients may differ in their
+/// last bits with summation order, and Adam's first steps turn a gradient's sign into a full
+/// step, so 1 % of values may differ.
 #[test]
 fn gpu_adam_moves_parameters_as_the_cpu_adam() {
     let (views, _) = scene();
@@ -122,17 +123,25 @@ fn gpu_adam_moves_parameters_as_the_cpu_adam() {
     let mut spec = spec(5);
     spec.densify = damage_twin::train::spec::DensifyPolicy::Off;
     let ctx = gpu_support::context();
-    let run = |resident: bool| {
+    let run = |resident: bool, loss_on_gpu: bool| {
         let backend = Box::new(GpuBackend::new(&ctx).unwrap());
         let mut trainer =
             Trainer::with_backend(spec.clone(), start.clone(), views.clone(), backend).unwrap();
         if !resident {
             trainer.leave_gpu_resident();
+        } else if !loss_on_gpu {
+            trainer.compute_loss_on_cpu();
         }
         train(&mut trainer);
         trainer.into_splats()
     };
-    let (on_gpu, on_cpu) = (run(true), run(false));
+    let on_cpu = run(false, false);
+    for on_gpu in [run(true, true), run(true, false)] {
+        check_same_moves(&start, &on_gpu, &on_cpu);
+    }
+}
+
+fn check_same_moves(start: &Splats, on_gpu: &Splats, on_cpu: &Splats) {
     let flat = |s: &Splats| -> Vec<f32> {
         let mut v: Vec<f32> = s.means.iter().flat_map(|m| m.to_array()).collect();
         v.extend(s.log_scales.iter().flat_map(|m| m.to_array()));
@@ -141,7 +150,7 @@ fn gpu_adam_moves_parameters_as_the_cpu_adam() {
         v.extend(&s.sh);
         v
     };
-    let (first, a, b) = (flat(&start), flat(&on_gpu), flat(&on_cpu));
+    let (first, a, b) = (flat(start), flat(on_gpu), flat(on_cpu));
     let largest = first
         .iter()
         .zip(&b)

@@ -10,6 +10,7 @@ mod count_probe;
 pub mod emit;
 mod frame_buffers;
 pub mod kernel;
+pub mod loss;
 pub mod prefix_sum;
 pub mod project;
 pub mod radix_sort;

@@ -475,6 +475,11 @@ impl GpuRenderer {
         })
     }
 
+    /// The last frame's colour+alpha and label buffers (the GPU loss reads them).
+    pub(super) fn forward_outputs(&self) -> Option<(&wgpu::Buffer, &wgpu::Buffer)> {
+        self.frame.as_ref().map(|f| (&f.out_color, &f.out_labels))
+    }
+
     /// The last frame's colour+alpha and depth buffers (the selection pass reads them).
     pub(super) fn forward_state_frame(&self) -> Option<(&wgpu::Buffer, &wgpu::Buffer)> {
         self.frame.as_ref().map(|f| (&f.out_color, &f.out_depth))

@@ -8,7 +8,8 @@ use std::time::Instant;
 
 use super::GpuBackend;
 use crate::gpu::adam::{DensifyStats, GROUPS, GpuAdam, GroupStep, Moments};
-use crate::gpu::{GpuError, readback};
+use crate::gpu::loss::{GpuLoss, LossTarget, LossWeights};
+use crate::gpu::{GpuError, GpuRenderSettings, readback};
 use crate::raster::{PixelGrads, RenderOutput, RenderSettings};
 use crate::scene::Camera;
 use crate::splats::Splats;
@@ -81,6 +82,70 @@ impl GpuBackend {
         self.timings.raster_backward = t.elapsed();
         self.timings.project_backward = std::time::Duration::ZERO;
         Ok(bits)
+    }
+
+    /// A resident step whose loss is computed on the GPU too: render the uploaded model, the
+    /// loss of `target` and its gradient into the backward's input, both backward kernels and
+    /// Adam, in one submission; reads back only the non-finite bits and the loss's partial sums.
+    /// Returns (loss, non-finite bits).
+    #[allow(clippy::too_many_arguments)]
+    pub fn step_resident_with_loss(
+        &mut self,
+        camera: &Camera,
+        settings: &RenderSettings,
+        target: &LossTarget,
+        weights: &LossWeights,
+        groups: &[GroupStep; GROUPS],
+        betas: (f32, f32, f32),
+    ) -> Result<(f32, u32), GpuError> {
+        let t = Instant::now();
+        self.renderer
+            .render_blocking(camera, &GpuRenderSettings::from(settings))?;
+        self.timings.raster_forward = t.elapsed();
+        let t = Instant::now();
+        let ctx = self.renderer.context().clone();
+        let k = camera.intrinsics;
+        let model = self.renderer.splat_buffers();
+        let labels = model.label_channels();
+        self.ensure_backward_buffers(k.width as usize * k.height as usize)?;
+        let loss = self.loss.get_or_insert_with(|| GpuLoss::new(&ctx.device));
+        loss.set_target(&ctx, k.width, k.height, labels, target, weights)?;
+        let (Some(buffers), Some(adam), Some(forward), Some((out_color, out_labels))) = (
+            self.buffers.as_ref(),
+            self.adam.as_ref(),
+            self.renderer.forward_state(),
+            self.renderer.forward_outputs(),
+        ) else {
+            return Err(GpuError::Device(
+                "a resident step needs an uploaded model and a forward first".into(),
+            ));
+        };
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        loss.encode(
+            &ctx.device,
+            &mut encoder,
+            out_color,
+            out_labels,
+            &buffers.v_pixels,
+        )?;
+        self.backward
+            .encode_rasterize(&ctx.device, &mut encoder, &forward, buffers);
+        self.backward
+            .encode_project(&ctx.device, &mut encoder, &forward, buffers);
+        adam.encode_step(
+            &ctx,
+            &mut encoder,
+            self.renderer.splat_buffers(),
+            buffers,
+            groups,
+            betas,
+        )?;
+        ctx.queue.submit([encoder.finish()]);
+        let bits = adam.take_non_finite(&ctx)?;
+        let value = loss.read_loss(&ctx)?;
+        self.timings.raster_backward = t.elapsed();
+        self.timings.project_backward = std::time::Duration::ZERO;
+        Ok((value, bits))
     }
 
     /// Reads the uploaded model back into `splats` (same count and shape) and returns Adam's

@@ -25,6 +25,8 @@ pub struct GpuBackend {
     fault: Option<String>,
     /// Adam's moments on the GPU, once the trainer keeps the model here (`resident`).
     adam: Option<super::adam::GpuAdam>,
+    /// The loss on the GPU (resident steps that compute it there).
+    loss: Option<super::loss::GpuLoss>,
 }
 
 #[path = "resident.rs"]
@@ -56,6 +58,7 @@ impl GpuBackend {
             timings: StageTimings::default(),
             fault: None,
             adam: None,
+            loss: None,
         })
     }
 
@@ -164,10 +167,9 @@ impl GpuBackend {
     /// Packs and uploads the pixel gradients, sizing the backward buffers for the uploaded model.
     pub(super) fn upload_pixel_grads(&mut self, v_out: &PixelGrads) -> Result<(), GpuError> {
         let ctx = self.renderer.context().clone();
-        let model = self.renderer.splat_buffers();
-        let l = model.label_channels();
-        let sh_floats = crate::splats::model::sh_coeffs_for_degree(model.sh_degree()) * 3;
+        let l = self.renderer.splat_buffers().label_channels();
         let pixels = v_out.color.len() / 3;
+        self.ensure_backward_buffers(pixels)?;
         let stride = PIXEL_FLOATS + l;
         self.packed.clear();
         self.packed.resize(pixels * stride, 0.0);
@@ -179,26 +181,29 @@ impl GpuBackend {
                 cell[PIXEL_FLOATS..].copy_from_slice(&labels[p * l..(p + 1) * l]);
             }
         }
-        let capacity = self.renderer.splat_buffers().capacity().max(1);
-        if !self
-            .buffers
-            .as_ref()
-            .is_some_and(|b| b.fits(capacity, pixels, l, sh_floats))
-        {
-            self.buffers = Some(BackwardBuffers::new(
-                &ctx.device,
-                capacity,
-                pixels,
-                l,
-                sh_floats,
-            ));
-        }
         let buffers = self
             .buffers
             .as_ref()
             .ok_or(GpuError::Device("backward buffers missing".into()))?;
         ctx.queue
             .write_buffer(&buffers.v_pixels, 0, bytemuck::cast_slice(&self.packed));
+        Ok(())
+    }
+
+    /// Sizes the backward's buffers for the uploaded model and a `pixels`-pixel frame.
+    pub(super) fn ensure_backward_buffers(&mut self, pixels: usize) -> Result<(), GpuError> {
+        let model = self.renderer.splat_buffers();
+        let l = model.label_channels();
+        let sh_floats = crate::splats::model::sh_coeffs_for_degree(model.sh_degree()) * 3;
+        let capacity = model.capacity().max(1);
+        if !self
+            .buffers
+            .as_ref()
+            .is_some_and(|b| b.fits(capacity, pixels, l, sh_floats))
+        {
+            let device = &self.renderer.context().device;
+            self.buffers = Some(BackwardBuffers::new(device, capacity, pixels, l, sh_floats));
+        }
         Ok(())
     }
 }

@@ -13,10 +13,13 @@ use std::time::Instant;
 
 use super::{CHECKPOINT_EVERY, StepReport, Trainer};
 use crate::gpu::adam::{GROUPS, GroupStep};
+use crate::gpu::loss::{LossTarget, LossWeights};
 use crate::gpu::{GpuBackend, GpuError};
+use crate::raster::MAX_LABEL_CHANNELS;
 use crate::raster::{PixelGrads, RasterBackend, RenderSettings};
 use crate::train::adam::ParamGroup;
 use crate::train::schedule::sh_degree_for_step;
+use crate::train::ssim::gaussian_window;
 
 /// Where a GPU-resident run stands.
 pub(super) struct Resident {
@@ -27,6 +30,8 @@ pub(super) struct Resident {
     stale: bool,
     /// The first GPU error (the run must end).
     fault: Option<String>,
+    /// The loss too is computed on the GPU (off: the frame comes back for the CPU's loss).
+    loss_on_gpu: bool,
 }
 
 impl Resident {
@@ -35,6 +40,7 @@ impl Resident {
             dirty: true,
             stale: false,
             fault: None,
+            loss_on_gpu: true,
         }
     }
 
@@ -60,6 +66,17 @@ pub(super) fn can_be_resident(
     gpu_of(backend).is_ok() && spec.max_scale_growth.is_none() && spec.appearance.is_none()
 }
 
+/// What the Adam kernel's non-finite bits say (bit g: a gradient of group g, bit 8 + g: a
+/// parameter it wrote), as the CPU optimiser words it.
+fn non_finite_reason(bits: u32) -> String {
+    let group = ParamGroup::ALL[(bits.trailing_zeros() % 8) as usize];
+    if bits & 0xff != 0 {
+        format!("gradient of {} is not finite", group.name())
+    } else {
+        format!("{} became non-finite", group.name())
+    }
+}
+
 impl Trainer {
     /// Whether the model lives on the GPU between syncs.
     pub fn is_gpu_resident(&self) -> bool {
@@ -71,6 +88,14 @@ impl Trainer {
     pub fn leave_gpu_resident(&mut self) {
         self.sync();
         self.resident = None;
+    }
+
+    /// Computes the loss on the CPU from the frame read back each step, as the per-step path
+    /// does, with the model, the backward and Adam still on the GPU (for comparisons).
+    pub fn compute_loss_on_cpu(&mut self) {
+        if let Some(r) = &mut self.resident {
+            r.loss_on_gpu = false;
+        }
     }
 
     /// Brings the CPU model (`splats()`), Adam's moments and the density statistics up to date
@@ -232,6 +257,9 @@ impl Trainer {
         started: Instant,
     ) -> Result<Option<StepReport>, GpuError> {
         self.upload_if_dirty()?;
+        if self.resident.as_ref().is_some_and(|r| r.loss_on_gpu) {
+            return self.resident_step_with_gpu_loss(step, view_index, settings, started);
+        }
         let t = Instant::now();
         let camera = self.views[view_index].camera;
         gpu_of(&mut self.rasterizer)?.forward_resident(&camera, settings, &mut self.out)?;
@@ -253,16 +281,7 @@ impl Trainer {
         }
 
         let t = Instant::now();
-        let lrs = self.lrs.for_step(step, self.extent);
-        let bias = self.adam.advance(&self.groups);
-        let groups: [GroupStep; GROUPS] = std::array::from_fn(|g| match bias[g] {
-            Some((bias1, bias2_sqrt)) => GroupStep {
-                step_size: lrs[g] / bias1,
-                inv_bias2_sqrt: 1.0 / bias2_sqrt,
-                on: true,
-            },
-            None => GroupStep::default(),
-        });
+        let groups = self.group_steps(step);
         let betas = (self.adam.beta1, self.adam.beta2, self.adam.eps);
         let v_out = PixelGrads {
             color: &self.v_color,
@@ -277,11 +296,79 @@ impl Trainer {
             r.stale = true;
         }
         if bits != 0 {
-            let group = ParamGroup::ALL[(bits.trailing_zeros() % 8) as usize];
-            let what = if bits & 0xff != 0 {
-                format!("gradient of {} is not finite", group.name())
+            let what = non_finite_reason(bits);
+            return Ok(Some(self.restore_checkpoint(step, started, what)));
+        }
+        self.last_loss = loss;
+        Ok(None)
+    }
+
+    /// The optimiser's step sizes for `step` (counting the step in the CPU optimiser).
+    fn group_steps(&mut self, step: u32) -> [GroupStep; GROUPS] {
+        let lrs = self.lrs.for_step(step, self.extent);
+        let bias = self.adam.advance(&self.groups);
+        std::array::from_fn(|g| match bias[g] {
+            Some((bias1, bias2_sqrt)) => GroupStep {
+                step_size: lrs[g] / bias1,
+                inv_bias2_sqrt: 1.0 / bias2_sqrt,
+                on: true,
+            },
+            None => GroupStep::default(),
+        })
+    }
+
+    /// Forward, loss, backward and Adam all on the GPU: one submission, the non-finite bits and
+    /// the loss's partial sums read back.
+    fn resident_step_with_gpu_loss(
+        &mut self,
+        step: u32,
+        view_index: usize,
+        settings: &RenderSettings,
+        started: Instant,
+    ) -> Result<Option<StepReport>, GpuError> {
+        let t = Instant::now();
+        let groups = self.group_steps(step);
+        let betas = (self.adam.beta1, self.adam.beta2, self.adam.eps);
+        let view = &self.views[view_index];
+        let channels = self.splats.label_channels;
+        let targets = self.spec.targets;
+        let labels_on = targets.label_weight > 0.0
+            && channels > 0
+            && view.labels.len() == channels
+            && channels <= MAX_LABEL_CHANNELS;
+        let masks: [Option<&[u8]>; MAX_LABEL_CHANNELS] = std::array::from_fn(|k| {
+            view.labels
+                .get(k)
+                .filter(|_| labels_on)
+                .map(|m| m.data.as_slice())
+        });
+        let target = LossTarget {
+            photo: &view.image.data,
+            region: self.regions[view_index].as_deref(),
+            labels: &masks[..channels.min(MAX_LABEL_CHANNELS)],
+        };
+        let weights = LossWeights {
+            ssim_lambda: targets.ssim_lambda,
+            rgb_weight: targets.rgb_weight.max(0.0),
+            label_weight: targets.label_weight,
+            pos_weight: self.label_params.pos_weight,
+            eps: self.label_params.eps,
+            window: gaussian_window(),
+        };
+        let camera = view.camera;
+        let (loss, bits) = gpu_of(&mut self.rasterizer)?
+            .step_resident_with_loss(&camera, settings, &target, &weights, &groups, betas)?;
+        let elapsed = t.elapsed().as_secs_f64();
+        self.timings.backward += elapsed;
+        self.timings.rasterize_backward += elapsed;
+        if let Some(r) = &mut self.resident {
+            r.stale = true;
+        }
+        if bits != 0 || !loss.is_finite() {
+            let what = if bits == 0 {
+                format!("loss is {loss}")
             } else {
-                format!("{} became non-finite", group.name())
+                non_finite_reason(bits)
             };
             return Ok(Some(self.restore_checkpoint(step, started, what)));
         }
