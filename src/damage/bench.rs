@@ -44,9 +44,12 @@ pub struct BenchReport {
     /// Parameters + gradients + Adam moments + density statistics.
     pub training_bytes_per_gaussian: usize,
     pub heldout_psnr: Option<f64>,
-    /// On the GPU backend: one step of the final model on the first training view, timed per
-    /// kernel and per transfer.
+    /// On the GPU backend: one GPU-resident step (what `--backend gpu` trains with) of the
+    /// final model on the first training view, timed per kernel.
     pub gpu_step_ms: Option<crate::gpu::StepProfile>,
+    /// The same step on the per-step path (model up, frame down, gradients down), timed per
+    /// kernel and per transfer.
+    pub gpu_per_step_path_ms: Option<crate::gpu::StepProfile>,
 }
 
 /// f32 values per Gaussian of the parameters.
@@ -54,13 +57,36 @@ fn floats_per_gaussian(splats: &Splats) -> usize {
     3 + 3 + 4 + 1 + splats.sh_coeffs() * 3 + splats.label_channels
 }
 
-/// One GPU step of `splats` on `view` timed per stage, with the L1 loss's pixel gradients.
+/// One GPU step of `splats` on `view` timed per stage, resident (the photometric loss on the
+/// GPU) and on the per-step path (with the L1 loss's pixel gradients).
 fn profile_gpu_step(
     splats: &Splats,
     view: &crate::train::spec::TrainView,
     settings: &RenderSettings,
-) -> Result<crate::gpu::StepProfile, crate::gpu::GpuError> {
+) -> Result<(crate::gpu::StepProfile, crate::gpu::StepProfile), crate::gpu::GpuError> {
     let ctx = GpuContext::new()?;
+    let mut backend = GpuBackend::new(&ctx)?;
+    let targets = crate::train::spec::Targets::default();
+    let params = crate::train::loss::LabelLossParams::default();
+    let no_labels: Vec<Option<&[u8]>> = vec![None; splats.label_channels];
+    let resident = backend.profile_resident_step(
+        splats,
+        &view.camera,
+        settings,
+        &crate::gpu::loss::LossTarget {
+            photo: &view.image.data,
+            region: None,
+            labels: &no_labels,
+        },
+        &crate::gpu::loss::LossWeights {
+            ssim_lambda: targets.ssim_lambda,
+            rgb_weight: 1.0,
+            label_weight: 0.0,
+            pos_weight: params.pos_weight,
+            eps: params.eps,
+            window: crate::train::ssim::gaussian_window(),
+        },
+    )?;
     let mut backend = GpuBackend::new(&ctx)?;
     let mut out = RenderOutput::default();
     backend.forward(splats, &view.camera, settings, &mut out);
@@ -77,7 +103,10 @@ fn profile_gpu_step(
         depth: None,
         labels: None,
     };
-    backend.profile_step(splats, &view.camera, settings, &v_out)
+    Ok((
+        resident,
+        backend.profile_step(splats, &view.camera, settings, &v_out)?,
+    ))
 }
 
 /// Benchmarks `config` (run in RGB mode: the benchmark times the photometric engine) on
@@ -112,13 +141,12 @@ pub fn bench_job(
         let steps = outcome.steps;
         let seconds = outcome.timings.total;
         let floats = floats_per_gaussian(&outcome.splats);
-        let gpu_step_ms = if outcome.renderer.starts_with("GPU") {
-            Some(
-                profile_gpu_step(&outcome.splats, &profile_view, &settings)
-                    .map_err(|e| JobError::Other(Box::new(e)))?,
-            )
+        let (gpu_step_ms, gpu_per_step_path_ms) = if outcome.renderer.starts_with("GPU") {
+            let (resident, per_step) = profile_gpu_step(&outcome.splats, &profile_view, &settings)
+                .map_err(|e| JobError::Other(Box::new(e)))?;
+            (Some(resident), Some(per_step))
         } else {
-            None
+            (None, None)
         };
         Ok(BenchReport {
             dataset: dataset.root.display().to_string(),
@@ -141,6 +169,7 @@ pub fn bench_job(
             training_bytes_per_gaussian: floats * 4 * 4 + 11 + 1 + 4 + 4 + 12,
             heldout_psnr: outcome.heldout.map(|s| s.psnr),
             gpu_step_ms,
+            gpu_per_step_path_ms,
         })
     })
 }

@@ -119,6 +119,16 @@ impl MomentLayout {
     }
 }
 
+/// Values per Gaussian of each group for `splats` (`train::adam::Adam::new`'s layout).
+pub fn per_group_counts(splats: &crate::splats::Splats) -> [usize; GROUPS] {
+    MomentLayout {
+        capacity: 1,
+        sh_floats: splats.sh_coeffs() * 3,
+        label_channels: splats.label_channels,
+    }
+    .per_gaussian()
+}
+
 /// Adam's moments in the CPU optimiser's per-group layout: `(m, v)` per group.
 pub type Moments = [(Vec<f32>, Vec<f32>); GROUPS];
 

@@ -200,3 +200,104 @@ impl GpuBackend {
             .take_stats(&ctx)
     }
 }
+
+impl GpuBackend {
+    /// One GPU-resident step (what `--backend gpu` trains with) timed stage by stage, each
+    /// stage submitted and waited for on its own (wall-clock): the photo's upload, the forward
+    /// kernels (GPU timestamps when the device has them), the loss, both backward kernels, Adam
+    /// and the read-back of the flag and the loss. The model and zero moments are uploaded
+    /// first (not timed: a run does that only after density control).
+    pub fn profile_resident_step(
+        &mut self,
+        splats: &Splats,
+        camera: &Camera,
+        settings: &RenderSettings,
+        target: &LossTarget,
+        weights: &LossWeights,
+    ) -> Result<super::StepProfile, GpuError> {
+        let per = crate::gpu::adam::per_group_counts(splats);
+        let zeros: Vec<Vec<f32>> = per.iter().map(|&k| vec![0.0; k * splats.len()]).collect();
+        let moments: [(&[f32], &[f32]); GROUPS] =
+            std::array::from_fn(|g| (zeros[g].as_slice(), zeros[g].as_slice()));
+        let frozen = vec![false; splats.len()];
+        self.upload_resident(splats, moments, &frozen)?;
+        let groups = [GroupStep {
+            step_size: 0.0,
+            inv_bias2_sqrt: 1.0,
+            on: true,
+        }; GROUPS];
+        let betas = (0.9, 0.999, 1e-15);
+        // One untimed step so that every buffer fits.
+        self.step_resident_with_loss(camera, settings, target, weights, &groups, betas)?;
+        let ctx = self.renderer.context().clone();
+        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+        let mut stages = Vec::new();
+        let k = camera.intrinsics;
+        let labels = self.renderer.splat_buffers().label_channels();
+        let t = Instant::now();
+        let loss = self
+            .loss
+            .as_mut()
+            .ok_or(GpuError::Device("loss stage missing".into()))?;
+        loss.set_target(&ctx, k.width, k.height, labels, target, weights)?;
+        ctx.wait_idle()?;
+        stages.push(("upload_photo", ms(t)));
+        let forward = self
+            .renderer
+            .render_timed(camera, &GpuRenderSettings::from(settings))?;
+        stages.extend(forward.stages.iter().copied());
+        let (Some(buffers), Some(adam), Some(loss), Some(state), Some((color, labels))) = (
+            self.buffers.as_ref(),
+            self.adam.as_ref(),
+            self.loss.as_ref(),
+            self.renderer.forward_state(),
+            self.renderer.forward_outputs(),
+        ) else {
+            return Err(GpuError::Device("resident stages missing".into()));
+        };
+        let mut timed =
+            |name: &'static str,
+             record: &mut dyn FnMut(&mut wgpu::CommandEncoder) -> Result<(), GpuError>|
+             -> Result<(), GpuError> {
+                let t = Instant::now();
+                let mut encoder = ctx.device.create_command_encoder(&Default::default());
+                record(&mut encoder)?;
+                ctx.queue.submit([encoder.finish()]);
+                ctx.wait_idle()?;
+                stages.push((name, ms(t)));
+                Ok(())
+            };
+        timed("loss", &mut |e| {
+            loss.encode(&ctx.device, e, color, labels, &buffers.v_pixels)
+        })?;
+        timed("rasterize_backward", &mut |e| {
+            self.backward
+                .encode_rasterize(&ctx.device, e, &state, buffers);
+            Ok(())
+        })?;
+        timed("project_backward", &mut |e| {
+            self.backward
+                .encode_project(&ctx.device, e, &state, buffers);
+            Ok(())
+        })?;
+        timed("adam", &mut |e| {
+            adam.encode_step(
+                &ctx,
+                e,
+                self.renderer.splat_buffers(),
+                buffers,
+                &groups,
+                betas,
+            )
+        })?;
+        let t = Instant::now();
+        adam.take_non_finite(&ctx)?;
+        loss.read_loss(&ctx)?;
+        stages.push(("read_flag_and_loss", ms(t)));
+        Ok(super::StepProfile {
+            forward_source: forward.source,
+            stages,
+            intersections: forward.intersections,
+        })
+    }
+}
