@@ -1,7 +1,8 @@
 //! `GpuBackend` keeping the model on the GPU between steps ("resident" training): the trainer
 //! uploads the model and Adam's moments after it changed them on the CPU, then each step renders
-//! the uploaded model, runs both backward kernels and Adam on the GPU and reads back only the
-//! frame (for the loss) and a 4-byte non-finite flag; it downloads the model, moments and
+//! the uploaded model and runs the loss (`step_resident_with_loss`; or the CPU's loss from the
+//! frame read back, `forward_resident` + `step_resident`), both backward kernels and Adam on the
+//! GPU, reading back a 4-byte non-finite flag and the loss; it downloads the model, moments and
 //! density statistics when density control, a checkpoint or a snapshot needs them.
 
 use std::time::Instant;
