@@ -418,3 +418,57 @@ fn damage_selection_and_hand_labels_undo_and_save() {
     let back = damage_twin::scene::ply::read_splats(&path).unwrap();
     assert_eq!(back.raw_labels, model.raw_labels);
 }
+
+/// The same strokes through the GPU selection pass (forced on lavapipe): a rectangle, a lasso
+/// added, then a hide, after which the pass must upload the model again (hidden Gaussians are
+/// never hit) while selection-only edits reuse its copy.
+#[test]
+fn the_gpu_selection_pass_selects_what_the_cpu_reference_does() {
+    let mut h = harness();
+    let ctx =
+        damage_twin::gpu::GpuContext::new().expect("GPU tests need an adapter (CI uses lavapipe)");
+    h.state_mut().state.select_on_gpu(&ctx).unwrap();
+    let c = centre(&h);
+    h.key_press(Key::R);
+    h.run_steps(1);
+    let (a, b) = (c + egui::vec2(-60.0, -40.0), c + egui::vec2(20.0, 30.0));
+    let rect = reference(&h, |o| Shape::Rect {
+        a: local(o, a),
+        b: local(o, b),
+    });
+    stroke(&mut h, &[a, c, b], Modifiers::NONE);
+    assert!(rect.len() > 20, "{}", rect.len());
+    assert_eq!(selected(&h), rect, "rectangle on the GPU");
+    let drawn = h.state().state.drawn_generation;
+    // Hide the selection: what is drawn changes.
+    h.key_press(Key::H);
+    h.run_steps(1);
+    assert!(
+        h.state().state.drawn_generation > drawn,
+        "hiding changes what is drawn"
+    );
+    h.key_press(Key::L);
+    h.run_steps(1);
+    let lasso = [
+        c + egui::vec2(-90.0, -60.0),
+        c + egui::vec2(60.0, -60.0),
+        c + egui::vec2(60.0, 50.0),
+        c + egui::vec2(-90.0, 50.0),
+    ];
+    let want = reference(&h, |o| {
+        Shape::Polygon(lasso.iter().map(|&p| local(o, p)).collect())
+    });
+    let drawn = h.state().state.drawn_generation;
+    stroke(&mut h, &lasso, Modifiers::NONE);
+    assert!(!want.is_empty() && want.iter().all(|g| !rect.contains(g)));
+    assert_eq!(selected(&h), want, "lasso on the GPU leaves the hidden out");
+    assert_eq!(
+        h.state().state.drawn_generation,
+        drawn,
+        "a selection edit keeps what is drawn"
+    );
+    assert!(
+        h.state().state.selects_on_gpu(),
+        "the GPU pass did not fall back"
+    );
+}

@@ -41,6 +41,21 @@ impl AppState {
         });
     }
 
+    /// Runs the selection test in the GPU selection pass on `ctx`'s device, even a software one
+    /// (tests; by default only a hardware GPU is used, on first need).
+    pub fn select_on_gpu(
+        &mut self,
+        ctx: &crate::gpu::GpuContext,
+    ) -> Result<(), crate::gpu::GpuError> {
+        self.gpu_selector = Some(Some(crate::gpu::select::GpuSelector::new(ctx)?));
+        Ok(())
+    }
+
+    /// Whether screen and volume shapes are tested in the GPU selection pass.
+    pub fn selects_on_gpu(&self) -> bool {
+        matches!(self.gpu_selector, Some(Some(_)))
+    }
+
     /// The GPU selection pass's hits, when a hardware GPU is there (created on first use; a
     /// software driver is slower than the CPU test, so it is never used for this).
     fn gpu_hits(&mut self, shape: &Shape, camera: &Camera, front: bool) -> Option<Vec<bool>> {
