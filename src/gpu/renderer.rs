@@ -109,6 +109,10 @@ pub(super) struct ForwardState<'a> {
     pub(super) projected: &'a wgpu::Buffer,
     pub(super) labels: &'a wgpu::Buffer,
     pub(super) out_state: &'a wgpu::Buffer,
+    /// The frame: colour + alpha, depth, label channels.
+    pub(super) out_color: &'a wgpu::Buffer,
+    pub(super) out_depth: &'a wgpu::Buffer,
+    pub(super) out_labels: &'a wgpu::Buffer,
     pub(super) geometry: &'a wgpu::Buffer,
     pub(super) sh: &'a wgpu::Buffer,
     pub(super) tile_bounds: [u32; 2],
@@ -456,7 +460,8 @@ impl GpuRenderer {
         self.read_frame()
     }
 
-    /// The last frame's buffers for the backward (None before the first frame).
+    /// The last frame's buffers for the backward, the GPU loss and the selection pass (None
+    /// before the first frame).
     pub(super) fn forward_state(&self) -> Option<ForwardState<'_>> {
         let frame = self.frame.as_ref()?;
         let plan = self.plan.as_ref()?;
@@ -468,21 +473,14 @@ impl GpuRenderer {
             projected: &frame.projected,
             labels: &frame.labels,
             out_state: &frame.out_state,
+            out_color: &frame.out_color,
+            out_depth: &frame.out_depth,
+            out_labels: &frame.out_labels,
             geometry: self.splats.geometry(),
             sh: self.splats.sh(),
             tile_bounds: plan.tile_bounds,
             num_gaussians: plan.num_gaussians,
         })
-    }
-
-    /// The last frame's colour+alpha and label buffers (the GPU loss reads them).
-    pub(super) fn forward_outputs(&self) -> Option<(&wgpu::Buffer, &wgpu::Buffer)> {
-        self.frame.as_ref().map(|f| (&f.out_color, &f.out_labels))
-    }
-
-    /// The last frame's colour+alpha and depth buffers (the selection pass reads them).
-    pub(super) fn forward_state_frame(&self) -> Option<(&wgpu::Buffer, &wgpu::Buffer)> {
-        self.frame.as_ref().map(|f| (&f.out_color, &f.out_depth))
     }
 
     /// Reads the last frame's outputs back.

@@ -65,18 +65,7 @@ impl GpuBackend {
             ));
         };
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        self.backward
-            .encode_rasterize(&ctx.device, &mut encoder, &forward, buffers);
-        self.backward
-            .encode_project(&ctx.device, &mut encoder, &forward, buffers);
-        adam.encode_step(
-            &ctx,
-            &mut encoder,
-            self.renderer.splat_buffers(),
-            buffers,
-            groups,
-            betas,
-        )?;
+        self.encode_backward_and_adam(&mut encoder, &forward, buffers, adam, groups, betas)?;
         ctx.queue.submit([encoder.finish()]);
         let bits = adam.take_non_finite(&ctx)?;
         // One submission: the whole backward and the optimiser are timed together.
@@ -109,13 +98,14 @@ impl GpuBackend {
         let model = self.renderer.splat_buffers();
         let labels = model.label_channels();
         self.ensure_backward_buffers(k.width as usize * k.height as usize)?;
-        let loss = self.loss.get_or_insert_with(|| GpuLoss::new(&ctx.device));
-        loss.set_target(&ctx, k.width, k.height, labels, target, weights)?;
-        let (Some(buffers), Some(adam), Some(forward), Some((out_color, out_labels))) = (
+        self.loss
+            .get_or_insert_with(|| GpuLoss::new(&ctx.device))
+            .set_target(&ctx, k.width, k.height, labels, target, weights)?;
+        let (Some(buffers), Some(adam), Some(loss), Some(forward)) = (
             self.buffers.as_ref(),
             self.adam.as_ref(),
+            self.loss.as_ref(),
             self.renderer.forward_state(),
-            self.renderer.forward_outputs(),
         ) else {
             return Err(GpuError::Device(
                 "a resident step needs an uploaded model and a forward first".into(),
@@ -125,28 +115,42 @@ impl GpuBackend {
         loss.encode(
             &ctx.device,
             &mut encoder,
-            out_color,
-            out_labels,
+            forward.out_color,
+            forward.out_labels,
             &buffers.v_pixels,
         )?;
-        self.backward
-            .encode_rasterize(&ctx.device, &mut encoder, &forward, buffers);
-        self.backward
-            .encode_project(&ctx.device, &mut encoder, &forward, buffers);
-        adam.encode_step(
-            &ctx,
-            &mut encoder,
-            self.renderer.splat_buffers(),
-            buffers,
-            groups,
-            betas,
-        )?;
+        self.encode_backward_and_adam(&mut encoder, &forward, buffers, adam, groups, betas)?;
         ctx.queue.submit([encoder.finish()]);
         let bits = adam.take_non_finite(&ctx)?;
         let value = loss.read_loss(&ctx)?;
         self.timings.raster_backward = t.elapsed();
         self.timings.project_backward = std::time::Duration::ZERO;
         Ok((value, bits))
+    }
+
+    /// Records both backward kernels of the last forward and Adam's step of the uploaded model.
+    fn encode_backward_and_adam(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        forward: &crate::gpu::renderer::ForwardState<'_>,
+        buffers: &crate::gpu::backward::BackwardBuffers,
+        adam: &GpuAdam,
+        groups: &[GroupStep; GROUPS],
+        betas: (f32, f32, f32),
+    ) -> Result<(), GpuError> {
+        let ctx = self.renderer.context();
+        self.backward
+            .encode_rasterize(&ctx.device, encoder, forward, buffers);
+        self.backward
+            .encode_project(&ctx.device, encoder, forward, buffers);
+        adam.encode_step(
+            ctx,
+            encoder,
+            self.renderer.splat_buffers(),
+            buffers,
+            groups,
+            betas,
+        )
     }
 
     /// Reads the uploaded model back into `splats` (same count and shape) and returns Adam's
@@ -247,12 +251,11 @@ impl GpuBackend {
             .renderer
             .render_timed(camera, &GpuRenderSettings::from(settings))?;
         stages.extend(forward.stages.iter().copied());
-        let (Some(buffers), Some(adam), Some(loss), Some(state), Some((color, labels))) = (
+        let (Some(buffers), Some(adam), Some(loss), Some(state)) = (
             self.buffers.as_ref(),
             self.adam.as_ref(),
             self.loss.as_ref(),
             self.renderer.forward_state(),
-            self.renderer.forward_outputs(),
         ) else {
             return Err(GpuError::Device("resident stages missing".into()));
         };
@@ -269,7 +272,13 @@ impl GpuBackend {
                 Ok(())
             };
         timed("loss", &mut |e| {
-            loss.encode(&ctx.device, e, color, labels, &buffers.v_pixels)
+            loss.encode(
+                &ctx.device,
+                e,
+                state.out_color,
+                state.out_labels,
+                &buffers.v_pixels,
+            )
         })?;
         timed("rasterize_backward", &mut |e| {
             self.backward

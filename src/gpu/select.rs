@@ -145,8 +145,9 @@ impl GpuSelector {
         let hits_buffer = kernel::storage(device, "select hits", words as u64 * 4, none);
         // Straight through, nothing reads the frame; a one-pixel stand-in keeps the layout.
         let spare = kernel::storage(device, "select no frame", 16, none);
-        let (color, depth) = match self.renderer.forward_state_frame().filter(|_| front) {
-            Some((color, depth)) => (color, depth),
+        let frame = self.renderer.forward_state().filter(|_| front);
+        let (color, depth) = match &frame {
+            Some(f) => (f.out_color, f.out_depth),
             None => (&spare, &spare),
         };
         let group = kernel::bind_group(

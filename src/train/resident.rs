@@ -18,7 +18,6 @@ use crate::gpu::{GpuBackend, GpuError};
 use crate::raster::MAX_LABEL_CHANNELS;
 use crate::raster::{PixelGrads, RasterBackend, RenderSettings};
 use crate::train::adam::ParamGroup;
-use crate::train::schedule::sh_degree_for_step;
 use crate::train::ssim::gaussian_window;
 
 /// Where a GPU-resident run stands.
@@ -179,14 +178,7 @@ impl Trainer {
         let step = self.steps_done + 1;
         let started = Instant::now();
         let view_index = self.next_view();
-        let settings = RenderSettings::new(
-            self.spec.background,
-            sh_degree_for_step(
-                step,
-                self.spec.sh_degree.min(self.splats.sh_degree),
-                self.spec.sh_ramp_every,
-            ),
-        );
+        let settings = self.step_settings(step);
         match self.resident_gpu_work(step, view_index, &settings, started) {
             Ok(Some(report)) => return report,
             Ok(None) => {}

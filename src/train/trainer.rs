@@ -360,11 +360,20 @@ impl Trainer {
 
     /// SH degree rendered at the current step.
     pub fn active_sh_degree(&self) -> u32 {
+        self.sh_degree_at(self.steps_done.max(1))
+    }
+
+    fn sh_degree_at(&self, step: u32) -> u32 {
         sh_degree_for_step(
-            self.steps_done.max(1),
+            step,
             self.spec.sh_degree.min(self.splats.sh_degree),
             self.spec.sh_ramp_every,
         )
+    }
+
+    /// How step `step` renders: the run's background, the SH degree its ramp has reached.
+    fn step_settings(&self, step: u32) -> RenderSettings {
+        RenderSettings::new(self.spec.background, self.sh_degree_at(step))
     }
 
     /// Each training view's learnt light (empty when the spec learns none).
@@ -412,14 +421,7 @@ impl Trainer {
         let step = self.steps_done + 1;
         let started = Instant::now();
         let view_index = self.next_view();
-        let settings = RenderSettings::new(
-            self.spec.background,
-            sh_degree_for_step(
-                step,
-                self.spec.sh_degree.min(self.splats.sh_degree),
-                self.spec.sh_ramp_every,
-            ),
-        );
+        let settings = self.step_settings(step);
 
         // Forward, of the tiles the view's loss region needs.
         let t = Instant::now();
@@ -555,7 +557,7 @@ impl Trainer {
     /// Prunes to the `keep` Gaussians with the most blending weight over the training views,
     /// keeping Adam and the density statistics in step.
     fn prune_by_importance(&mut self, keep: usize) {
-        let settings = RenderSettings::new(self.spec.background, self.active_sh_degree());
+        let settings = self.step_settings(self.steps_done.max(1));
         let score = importance(&self.splats, &self.views, &settings);
         let mask = prune_to(&mut self.splats, &score, keep);
         self.adam.retain(&mask);
@@ -602,7 +604,7 @@ impl Trainer {
     pub fn evaluate(&mut self, views: &[TrainView]) -> EvalScores {
         self.sync();
         self.rasterizer.set_active_tiles(None);
-        let settings = RenderSettings::new(self.spec.background, self.active_sh_degree());
+        let settings = self.step_settings(self.steps_done.max(1));
         evaluate_with(
             self.rasterizer.as_mut(),
             &mut self.out,
