@@ -142,6 +142,8 @@ pub struct DensifyStats {
 
 pub struct GpuAdam {
     pipeline: wgpu::ComputePipeline,
+    /// This step's rates (rewritten every step).
+    uniforms: wgpu::Buffer,
     layout: Option<MomentLayout>,
     moments: wgpu::Buffer,
     stats: wgpu::Buffer,
@@ -153,6 +155,7 @@ impl GpuAdam {
         let none = wgpu::BufferUsages::empty();
         GpuAdam {
             pipeline: kernel::pipeline(&ctx.device, "adam", SHADER, "adam_step"),
+            uniforms: kernel::uniform::<AdamUniforms>(&ctx.device, "adam uniforms"),
             layout: None,
             moments: kernel::storage(&ctx.device, "adam moments", 0, none),
             stats: kernel::storage(&ctx.device, "adam stats", 0, none),
@@ -325,19 +328,14 @@ impl GpuAdam {
             pad: [0; 2],
         };
         let device = &ctx.device;
-        let uniform_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("adam uniforms"),
-            size: std::mem::size_of::<AdamUniforms>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        // Written in queue order, before the submission that holds this step.
         ctx.queue
-            .write_buffer(&uniform_buffer, 0, bytemuck::bytes_of(&uniforms));
+            .write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&uniforms));
         let group = kernel::bind_group(
             device,
             &self.pipeline,
             &[
-                (0, Bind::Buffer(&uniform_buffer)),
+                (0, Bind::Buffer(&self.uniforms)),
                 (1, Bind::Buffer(splats.geometry())),
                 (2, Bind::Buffer(splats.sh())),
                 (3, Bind::Buffer(splats.raw_labels())),

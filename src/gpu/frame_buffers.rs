@@ -62,12 +62,7 @@ impl FrameBuffers {
             width,
             height,
             label_channels,
-            uniforms: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("frame uniforms"),
-                size: std::mem::size_of::<FrameUniforms>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
+            uniforms: kernel::uniform::<FrameUniforms>(device, "frame uniforms"),
             projected: kernel::storage(device, "projected", n * PROJECTED_BYTES, none),
             depth_keys: kernel::storage(device, "depth_keys", n * 4, none),
             depth_gids: kernel::storage(device, "depth_gids", n * 4, none),

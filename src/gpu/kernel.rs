@@ -105,6 +105,16 @@ pub fn dispatch(pass: &mut wgpu::ComputePass<'_>, groups: u32) {
     }
 }
 
+/// A uniform buffer for one `T` (written with `queue.write_buffer`).
+pub fn uniform<T>(device: &wgpu::Device, label: &str) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: std::mem::size_of::<T>() as u64,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
 /// A storage buffer of `bytes` (at least 16, so empty arrays still bind).
 pub fn storage(
     device: &wgpu::Device,

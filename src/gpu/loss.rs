@@ -132,14 +132,7 @@ impl GpuLoss {
         if !fits {
             let none = wgpu::BufferUsages::empty();
             let groups = n.div_ceil(kernel::WORKGROUP as usize);
-            let uniform = || {
-                device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("loss uniforms"),
-                    size: std::mem::size_of::<LossUniforms>() as u64,
-                    usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                })
-            };
+            let uniform = || kernel::uniform::<LossUniforms>(device, "loss uniforms");
             let planes = |count: u32| (n * count as usize * 4) as u64;
             self.buffers = Some(LossBuffers {
                 width,

@@ -122,12 +122,7 @@ impl GpuSelector {
             radius,
             log_scales_at: self.renderer.splat_buffers().layout().log_scales_at,
         };
-        let uniform_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("select uniforms"),
-            size: std::mem::size_of::<SelectUniforms>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let uniform_buffer = kernel::uniform::<SelectUniforms>(device, "select uniforms");
         ctx.queue
             .write_buffer(&uniform_buffer, 0, bytemuck::bytes_of(&uniforms));
         let none = wgpu::BufferUsages::empty();
