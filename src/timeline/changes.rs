@@ -26,7 +26,8 @@ pub struct DetectConfig {
     pub scale: ImageScale,
     pub readout: DamageReadout,
     pub background: glam::Vec3,
-    /// Old damage grown by this many pixels is not new (misregistration, blur).
+    /// New blobs lying wholly within this many pixels of old damage of their class are old
+    /// damage seen shifted (misregistration, blur); growth reaching beyond the band stays.
     pub band_px: u32,
     /// New-damage blobs smaller than this many pixels are dropped.
     pub min_area_px: usize,
@@ -111,6 +112,18 @@ fn dilate(mask: &Mask, r: u32) -> Mask {
 
 /// Drops 8-connected blobs of fewer than `min_area` pixels.
 fn drop_small(mask: &Mask, min_area: usize) -> Mask {
+    drop_blobs(mask, |blob| blob.len() < min_area)
+}
+
+/// Drops the 8-connected blobs of `new` that lie wholly inside `band`: thin slivers along old
+/// damage that misregistration and blur leave, while growth that reaches beyond the band is
+/// kept whole (its pixels next to the old damage included).
+fn drop_slivers(new: &Mask, band: &Mask) -> Mask {
+    drop_blobs(new, |blob| blob.iter().all(|&p| band.data[p] != 0))
+}
+
+/// Drops the 8-connected blobs (pixel indices) for which `drop` is true.
+fn drop_blobs(mask: &Mask, drop: impl Fn(&[usize]) -> bool) -> Mask {
     let (w, h) = (mask.width as usize, mask.height as usize);
     let mut out = mask.clone();
     let mut seen = vec![false; w * h];
@@ -140,7 +153,7 @@ fn drop_small(mask: &Mask, min_area: usize) -> Mask {
                 }
             }
         }
-        if blob.len() < min_area {
+        if drop(&blob) {
             for &p in &blob {
                 out.data[p] = 0;
             }
@@ -275,13 +288,14 @@ pub fn detect(
         &truth,
     )];
 
-    // Tolerance band: observed damage within `band_px` of the same class's old damage is old.
+    // Tolerance band: a new blob lying wholly within `band_px` of the same class's old damage
+    // is old damage seen a little shifted.
     for v in &mut views {
         v.new = v
-            .observed
+            .new
             .iter()
             .zip(&v.old)
-            .map(|(o, r)| and_not(o, &dilate(r, config.band_px)))
+            .map(|(n, r)| drop_slivers(n, &dilate(r, config.band_px)))
             .collect();
     }
     steps.push(score(
@@ -457,8 +471,9 @@ mod tests {
     #[test]
     fn band_and_area_drop_thin_edges_and_specks() {
         // Old damage: a vertical line at x = 5. Observed: the line shifted by one pixel (a
-        // misregistration), a speck, and a real new 4×4 block.
-        let old = mask(20, 12, &(0..12).map(|y| (5, y)).collect::<Vec<_>>());
+        // misregistration), a speck, a real new 4×4 block, and growth from the old line's lower
+        // end: a horizontal run from x = 4 to x = 11 on row 13 (its first pixels in the band).
+        let old = mask(20, 15, &(0..12).map(|y| (5, y)).collect::<Vec<_>>());
         let mut cells: Vec<(u32, u32)> = (0..12).map(|y| (6, y)).collect();
         cells.push((15, 1));
         for y in 6..10 {
@@ -466,17 +481,30 @@ mod tests {
                 cells.push((x, y));
             }
         }
-        let observed = mask(20, 12, &cells);
+        let growth: Vec<(u32, u32)> = (4..12).map(|x| (x, 13)).collect();
+        cells.extend(&growth);
+        let observed = mask(20, 15, &cells);
         let raw = and_not(&observed, &old);
-        assert_eq!(raw.count(), 12 + 1 + 16);
-        let banded = and_not(&observed, &dilate(&old, 2));
+        assert_eq!(raw.count(), 12 + 1 + 16 + 8);
+        let banded = drop_slivers(&raw, &dilate(&old, 2));
         assert_eq!(
             banded.count(),
-            1 + 16,
-            "the shifted line is within the band"
+            1 + 16 + 8,
+            "the shifted line lies within the band and goes; the growth reaching out of it stays whole"
         );
+        for &(x, y) in &growth {
+            assert_eq!(
+                banded.data[(y * 20 + x) as usize],
+                1,
+                "growth pixel ({x}, {y})"
+            );
+        }
         let cleaned = drop_small(&banded, 4);
-        assert_eq!(cleaned.count(), 16, "the speck is dropped, the block stays");
+        assert_eq!(
+            cleaned.count(),
+            16 + 8,
+            "the speck is dropped, the block stays"
+        );
     }
 
     #[test]

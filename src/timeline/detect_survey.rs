@@ -25,12 +25,17 @@ use crate::train::job::{Job, JobError, JobOptions, Progress};
 pub const CHANGES_DIR: &str = "changes";
 pub const CHANGES_FILE: &str = "changes.json";
 
+/// The default tolerance band: on the demo it removes the thin slivers a registered survey
+/// leaves along old cracks (joint-frame crack precision 0.764 → 0.957) at a cost of under 0.011
+/// recall per class (docs/TIMELINE.md, "Detection, measured").
+pub const DEFAULT_BAND_PX: u32 = 1;
+
 /// How changes are found (the CLI's flags; docs/TIMELINE.md measures each).
 #[derive(Clone, Debug, PartialEq)]
 pub struct DetectOptions {
     /// The resolution changes are found at.
     pub scale: ImageScale,
-    /// Old damage grown by this many pixels is not new.
+    /// New blobs wholly within this many pixels of old damage of their class are not new.
     pub band_px: u32,
     /// New-damage blobs smaller than this many pixels are dropped.
     pub min_area_px: usize,
@@ -48,7 +53,7 @@ impl Default for DetectOptions {
     fn default() -> Self {
         DetectOptions {
             scale: ImageScale::Factor(2),
-            band_px: 0,
+            band_px: DEFAULT_BAND_PX,
             min_area_px: 0,
             earlier: false,
             earlier_radius: 2,

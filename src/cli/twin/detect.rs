@@ -22,8 +22,9 @@ pub struct Args {
     /// The resolution changes are found at (2: 480×270 of a 960×540 survey).
     #[arg(long, default_value = "2", value_parser = parse_scale)]
     pub scale: ImageScale,
-    /// Old damage grown by this many pixels is not new (misregistration, blur).
-    #[arg(long, default_value_t = 0)]
+    /// New blobs lying wholly within this many pixels of old damage of their class are old
+    /// damage seen shifted (misregistration, blur); growth reaching beyond is kept (0: off).
+    #[arg(long, default_value_t = damage_twin::timeline::detect_survey::DEFAULT_BAND_PX)]
     pub band: u32,
     /// New-damage blobs smaller than this are dropped (pixels at the detection scale).
     #[arg(long, default_value_t = 0)]
