@@ -192,6 +192,8 @@ pub struct Adam {
     /// 1e-15 as 3DGS sets it (torch's default 1e-8 would damp the tiny position updates).
     pub eps: f32,
     groups: [Moments; 7],
+    /// Per group, an optional factor per Gaussian on its learning rate (see `set_rates`).
+    rates: [Option<Vec<f32>>; 7],
     len: usize,
 }
 
@@ -225,8 +227,35 @@ impl Adam {
             beta2: 0.999,
             eps: 1e-15,
             groups: per.map(|p| Moments::zeros(n, p)),
+            rates: Default::default(),
             len: n,
         }
+    }
+
+    /// Scales group `g`'s learning rate per Gaussian by `rates` (one factor per Gaussian; None:
+    /// 1 for every one). Gaussians appended later get 1. Only the geometry groups (means,
+    /// log-scales, rotations, opacities) take factors: the SH groups are updated fused.
+    pub fn set_rates(&mut self, g: ParamGroup, rates: Option<Vec<f32>>) -> Result<(), String> {
+        if matches!(g, ParamGroup::ShDc | ParamGroup::ShRest) {
+            return Err(format!("{} takes no per-Gaussian rates", g.name()));
+        }
+        if let Some(r) = &rates
+            && r.len() != self.len
+        {
+            return Err(format!(
+                "{} rates: {} factors for {} Gaussians",
+                g.name(),
+                r.len(),
+                self.len
+            ));
+        }
+        self.rates[g.index()] = rates;
+        Ok(())
+    }
+
+    /// Whether any group has per-Gaussian rates (a GPU step has no such factors).
+    pub fn has_rates(&self) -> bool {
+        self.rates.iter().any(Option::is_some)
     }
 
     /// Gaussians tracked.
@@ -277,7 +306,7 @@ impl Adam {
         }
         let mut found = None;
         let (beta1, beta2, eps) = (self.beta1, self.beta2, self.eps);
-        let update = |mom: &mut Moments, lr: f32, frozen| {
+        let update = |mom: &mut Moments, lr: f32, frozen, rate| {
             mom.step += 1;
             let t = mom.step as i32;
             Update {
@@ -289,6 +318,7 @@ impl Adam {
                 bias2_sqrt: (1.0 - beta2.powi(t)).sqrt(),
                 frozen,
                 visible,
+                rate,
             }
         };
         let (dc, rest) = (ParamGroup::ShDc.index(), ParamGroup::ShRest.index());
@@ -300,8 +330,8 @@ impl Adam {
             }
             if fuse_sh && group == ParamGroup::ShDc {
                 let (head, tail) = self.groups.split_at_mut(rest);
-                let u_dc = update(&mut head[dc], lrs[dc], &splats.meta.frozen);
-                let u_rest = update(&mut tail[0], lrs[rest], &splats.meta.frozen);
+                let u_dc = update(&mut head[dc], lrs[dc], &splats.meta.frozen, None);
+                let u_rest = update(&mut tail[0], lrs[rest], &splats.meta.frozen, None);
                 let checks = update_sh_groups(
                     &mut splats.sh,
                     grads.v_sh,
@@ -321,7 +351,7 @@ impl Adam {
                 continue;
             }
             let mom = &mut self.groups[gi];
-            let u = update(mom, lrs[gi], &splats.meta.frozen);
+            let u = update(mom, lrs[gi], &splats.meta.frozen, self.rates[gi].as_deref());
             let check = match group {
                 ParamGroup::Means => {
                     let p: &mut [f32] = bytemuck::cast_slice_mut(&mut splats.means);
@@ -364,6 +394,9 @@ impl Adam {
             g.m.resize(new, 0.0);
             g.v.resize(new, 0.0);
         }
+        for r in self.rates.iter_mut().flatten() {
+            r.resize(r.len() + n, 1.0);
+        }
         self.len += n;
     }
 
@@ -382,6 +415,10 @@ impl Adam {
             }
             g.m.truncate(w * s);
             g.v.truncate(w * s);
+        }
+        for r in self.rates.iter_mut().flatten() {
+            let mut kept = keep.iter();
+            r.retain(|_| kept.next().copied().unwrap_or(false));
         }
         self.len = keep.iter().filter(|&&k| k).count();
     }

@@ -249,3 +249,57 @@ fn both_sh_groups_in_one_pass_match_one_group_at_a_time() {
     let k3 = together.sh_coeffs() * 3;
     assert_eq!(together.sh[k3..3 * k3], model(5).sh[k3..3 * k3]);
 }
+
+#[test]
+fn per_gaussian_rates_scale_each_gaussians_steps() {
+    let mut s = model(3);
+    let mut adam = Adam::new(&s);
+    adam.set_rates(ParamGroup::Means, Some(vec![1.0, 0.1, 0.0]))
+        .expect("three factors");
+    adam.set_rates(ParamGroup::RawOpacities, Some(vec![0.5, 1.0, 1.0]))
+        .expect("three factors");
+    assert!(adam.set_rates(ParamGroup::Means, Some(vec![1.0])).is_err());
+    assert!(
+        adam.set_rates(ParamGroup::ShDc, Some(vec![1.0; 3]))
+            .is_err()
+    );
+    let grads = Grads::constant(&s, 0.3);
+    let seq = [0.3f64; 4];
+    for _ in 0..4 {
+        adam.step(&mut s, &grads.view(), &[0.1; 7], &GroupFlags::ALL_ON, None);
+    }
+    // Each Gaussian follows torch's Adam at its own rate; groups without factors are unscaled.
+    let want = |p0: f64, lr: f64| reference(p0, &seq, lr) as f32;
+    assert!((s.means[0].x - want(0.0, 0.1)).abs() < 1e-5);
+    assert!((s.means[1].x - want(1.0, 0.01)).abs() < 1e-5);
+    assert_eq!(s.means[2], Vec3::splat(2.0), "factor 0: the Gaussian stays");
+    assert!((s.raw_opacities[0] - want(0.0, 0.05)).abs() < 1e-5);
+    assert!((s.raw_opacities[1] - want(0.0, 0.1)).abs() < 1e-5);
+    assert!((s.log_scales[1].x - want(0.0, 0.1)).abs() < 1e-5);
+    // Pruning keeps each survivor's factor; appended Gaussians get 1.
+    adam.retain(&[false, true, true]);
+    s.retain(&[false, true, true]);
+    adam.append(1);
+    s.push(
+        Vec3::ZERO,
+        Vec3::ZERO,
+        Quat::IDENTITY,
+        0.0,
+        &[0.5; 12],
+        &[0.0; 2],
+        9,
+        0,
+    );
+    let before: Vec<Vec3> = s.means.clone();
+    let grads = Grads::constant(&s, 0.3);
+    adam.step(&mut s, &grads.view(), &[0.1; 7], &GroupFlags::ALL_ON, None);
+    assert_eq!(s.means[1], before[1], "the factor-0 Gaussian still stays");
+    // The new Gaussian's first moments, bias-corrected with the group's fifth step, at rate 1.
+    let (m, v) = (0.1f64 * 0.3, 0.001f64 * 0.09);
+    let full = 0.1 / (1.0 - 0.9f64.powi(5)) * m / (v.sqrt() / (1.0 - 0.999f64.powi(5)).sqrt());
+    assert!(
+        (s.means[2].x as f64 + full).abs() < 1e-5,
+        "{}",
+        s.means[2].x
+    );
+}

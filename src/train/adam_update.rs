@@ -19,6 +19,8 @@ pub(super) struct Update<'a> {
     pub bias2_sqrt: f32,
     pub frozen: &'a [bool],
     pub visible: Option<&'a [bool]>,
+    /// Per Gaussian, a factor on `lr` (None: 1).
+    pub rate: Option<&'a [f32]>,
 }
 
 /// What an update found not finite among the gradients it read and the values it wrote, as the
@@ -135,7 +137,7 @@ fn update_chunk_impl(
     let count = p.len() / stride;
     let mut check = FiniteCheck::default();
     let keeps = |gi: usize| !(u.frozen[gi] || u.visible.is_some_and(|vis| !vis[gi]));
-    if stride == len && len <= MAX_CONTIGUOUS {
+    if stride == len && len <= MAX_CONTIGUOUS && u.rate.is_none() {
         // The group is the whole array: blocks of Gaussians, one flat (masked) run each.
         let mut keep = [false; BLOCK_GAUSSIANS * MAX_CONTIGUOUS];
         let mut start = 0;
@@ -165,6 +167,17 @@ fn update_chunk_impl(
             continue;
         }
         let at = i * stride + offset;
+        let scaled;
+        let u = match u.rate {
+            Some(rate) => {
+                scaled = Update {
+                    lr: u.lr * rate[first + i],
+                    ..*u
+                };
+                &scaled
+            }
+            None => u,
+        };
         check = check.merge(adam_run(
             &mut p[at..at + len],
             &g[at..at + len],

@@ -62,7 +62,10 @@ pub(super) fn can_be_resident(
     spec: &crate::train::spec::TrainSpec,
     backend: &mut Box<dyn RasterBackend>,
 ) -> bool {
-    gpu_of(backend).is_ok() && spec.max_scale_growth.is_none() && spec.appearance.is_none()
+    gpu_of(backend).is_ok()
+        && spec.max_scale_growth.is_none()
+        && spec.appearance.is_none()
+        && spec.geometry_rate.is_none()
 }
 
 /// What the Adam kernel's non-finite bits say (bit g: a gradient of group g, bit 8 + g: a

@@ -204,6 +204,11 @@ pub struct TrainSpec {
     pub max_scale_growth: Option<f32>,
     /// Learn each training photo's light (`appearance`; None: the photos as they are).
     pub appearance: Option<crate::train::appearance::AppearanceConfig>,
+    /// Per Gaussian of the initial model, a factor on its position, scale, rotation and opacity
+    /// rates (None: 1 for every one; Gaussians created by densification get 1). The timeline's
+    /// update continues the twin's Gaussians gently while its new-damage seeds learn at full rates.
+    #[serde(default)]
+    pub geometry_rate: Option<Vec<f32>>,
     /// The renderer the run trains on (CPU by default).
     #[serde(default)]
     pub backend: crate::train::backend_choice::Backend,
@@ -227,6 +232,7 @@ impl TrainSpec {
             eval_every: 0,
             max_scale_growth: None,
             appearance: None,
+            geometry_rate: None,
             backend: Default::default(),
         }
     }

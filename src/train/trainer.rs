@@ -13,7 +13,7 @@ use crate::raster::{
 };
 use crate::scene::Mask;
 use crate::splats::Splats;
-use crate::train::adam::{Adam, GroupFlags, LearningRates, ParamGrads};
+use crate::train::adam::{Adam, GroupFlags, LearningRates, ParamGrads, ParamGroup};
 use crate::train::appearance::AppearanceModel;
 use crate::train::densify::{Densifier, camera_extent};
 use crate::train::evaluate::{EvalScores, evaluate_with};
@@ -49,6 +49,8 @@ pub enum TrainError {
     },
     #[error("the trainable mask has {got} entries for {expected} Gaussians")]
     TrainableMask { got: usize, expected: usize },
+    #[error("per-Gaussian rates: {0}")]
+    Rates(String),
     #[error("the initial splats are inconsistent: {0}")]
     Splats(String),
     #[error("the initial splats contain NaN or Inf ({0})")]
@@ -249,7 +251,18 @@ impl Trainer {
         let densifier = spec
             .densify_config()
             .map(|config| Densifier::new(config, splats.len()));
-        let adam = Adam::new(&splats);
+        let mut adam = Adam::new(&splats);
+        if let Some(rates) = &spec.geometry_rate {
+            for group in [
+                ParamGroup::Means,
+                ParamGroup::LogScales,
+                ParamGroup::Rotations,
+                ParamGroup::RawOpacities,
+            ] {
+                adam.set_rates(group, Some(rates.clone()))
+                    .map_err(TrainError::Rates)?;
+            }
+        }
         let scale_cap = spec
             .max_scale_growth
             .map(|growth| ScaleCap::new(&splats, |g| !splats.meta.frozen[g], growth));
