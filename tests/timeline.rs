@@ -98,6 +98,7 @@ fn detection_and_update_keep_the_history() {
             ..RefineConfig::default()
         },
         appearance: true,
+        seeds: Some(damage_twin::timeline::seed::SeedConfig::default()),
     };
     let outcome = update_job(
         twin.clone(),
@@ -118,8 +119,8 @@ fn detection_and_update_keep_the_history() {
         "survey 1's model is byte-identical after the update"
     );
 
-    // History: survey 2's model holds survey 1's Gaussians (fine-tune keeps the count) with
-    // survey 1's damage tagged 0 and the damage first seen now tagged 1.
+    // History: survey 2's model holds survey 1's Gaussians (fine-tune keeps them all) and the
+    // new-damage seeds, with survey 1's damage tagged 0 and the damage first seen now tagged 1.
     let reopened = Twin::open(&dir.path().join("project")).expect("reopens");
     let updated = reopened
         .load_model("2025")
@@ -129,7 +130,32 @@ fn detection_and_update_keep_the_history() {
         .load_model("2024")
         .expect("loads")
         .expect("survey 1 has a model");
-    assert_eq!(updated.len(), before.len());
+    let seeds: usize = outcome
+        .report
+        .seeds
+        .as_ref()
+        .expect("seeding is on")
+        .seeds
+        .values()
+        .sum();
+    assert!(seeds > 0, "survey 2's new damage is seeded");
+    assert_eq!(updated.len(), before.len() + seeds);
+    assert_eq!(
+        updated.meta.ids[..before.len()],
+        before.meta.ids[..],
+        "survey 1's Gaussians come first, in order"
+    );
+    let first_seed = before.meta.next_id();
+    assert!(
+        updated.meta.ids[before.len()..]
+            .iter()
+            .all(|&id| id >= first_seed),
+        "seeds take fresh ids"
+    );
+    assert!(
+        updated.meta.survey[before.len()..].iter().all(|&s| s == 1),
+        "seeds appeared in survey 2"
+    );
     let tags = &updated.meta.damage_survey;
     let new_tagged = tags.iter().filter(|&&s| s == 1).count();
     let old_tagged = tags.iter().filter(|&&s| s == 0).count();

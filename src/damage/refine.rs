@@ -90,6 +90,9 @@ pub struct RefineConfig {
     pub lr: crate::train::spec::LrOverrides,
     /// Each refined Gaussian's scale stays within this factor of its size before (None: free).
     pub max_scale_growth: Option<f32>,
+    /// A factor on the position, scale, rotation and opacity rates of the selected Gaussians that
+    /// are only neighbours of damage (None: full rates; `TrainSpec::geometry_rate`).
+    pub neighbour_geometry_rate: Option<f32>,
     /// The renderer the refinement trains on.
     pub backend: crate::train::backend_choice::Backend,
 }
@@ -120,6 +123,7 @@ impl Default for RefineConfig {
             given: None,
             lr: crate::train::spec::LrOverrides::default(),
             max_scale_growth: None,
+            neighbour_geometry_rate: None,
             backend: Default::default(),
         }
     }
@@ -248,6 +252,18 @@ pub fn refine(
     model: &Splats,
     config: &RefineConfig,
 ) -> Result<RefineOutcome, JobError> {
+    refine_from(ctx, dataset, model, model, config)
+}
+
+/// `refine` of `model`, scored before against `baseline`: the twin as it was, when the caller
+/// added Gaussians to it for the refinement to train (the update's new-damage seeds).
+pub fn refine_from(
+    ctx: &mut JobContext,
+    dataset: &Dataset,
+    baseline: &Splats,
+    model: &Splats,
+    config: &RefineConfig,
+) -> Result<RefineOutcome, JobError> {
     let started = Instant::now();
     let mut seconds = PhaseSeconds::default();
     let mode = config.select.mode;
@@ -368,6 +384,13 @@ pub fn refine(
     let t = Instant::now();
     let mut spec = refine_spec(config, model, labels);
     spec.trainable = Some(selection.mask(n));
+    if let Some(rate) = config.neighbour_geometry_rate {
+        let mut rates = vec![rate; n];
+        for &g in &selection.validated {
+            rates[g as usize] = 1.0;
+        }
+        spec.geometry_rate = Some(rates);
+    }
     // A full-image step of the same run, for the cost comparison: a few steps on uncropped views.
     let full_step_ms = full_step_ms(dataset, model, &spec, &trained, config, mode)?;
     let setup = TrainSetup {
@@ -385,10 +408,10 @@ pub fn refine(
     let t = Instant::now();
     let readout = DamageReadout {
         mode,
-        ..DamageReadout::for_model(model, config.select.palette)
+        ..DamageReadout::for_model(baseline, config.select.palette)
     };
     let heldout: Vec<&ViewHulls> = views.iter().filter(|v| v.heldout).collect();
-    let before = quality(dataset, model, &heldout, config, &readout)?;
+    let before = quality(dataset, baseline, &heldout, config, &readout)?;
     let after = quality(dataset, &refined, &heldout, config, &readout)?;
     seconds.evaluate = t.elapsed().as_secs_f64();
     seconds.total = started.elapsed().as_secs_f64();
@@ -410,7 +433,7 @@ pub fn refine(
         hull_fraction,
         seconds,
         selection_seconds: selection.seconds,
-        gaussians_before: model.len(),
+        gaussians_before: baseline.len(),
         gaussians_after: refined.len(),
         ms_per_refine_step: outcome.timings.total * 1000.0 / outcome.steps.max(1) as f64,
         ms_per_full_step: full_step_ms,

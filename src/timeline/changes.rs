@@ -86,7 +86,7 @@ impl Detection {
     }
 }
 
-fn dilate(mask: &Mask, r: u32) -> Mask {
+pub(super) fn dilate(mask: &Mask, r: u32) -> Mask {
     if r == 0 {
         return mask.clone();
     }
@@ -111,14 +111,14 @@ fn dilate(mask: &Mask, r: u32) -> Mask {
 }
 
 /// Drops 8-connected blobs of fewer than `min_area` pixels.
-fn drop_small(mask: &Mask, min_area: usize) -> Mask {
+pub(super) fn drop_small(mask: &Mask, min_area: usize) -> Mask {
     drop_blobs(mask, |blob| blob.len() < min_area)
 }
 
 /// Drops the 8-connected blobs of `new` that lie wholly inside `band`: thin slivers along old
 /// damage that misregistration and blur leave, while growth that reaches beyond the band is
 /// kept whole (its pixels next to the old damage included).
-fn drop_slivers(new: &Mask, band: &Mask) -> Mask {
+pub(super) fn drop_slivers(new: &Mask, band: &Mask) -> Mask {
     drop_blobs(new, |blob| blob.iter().all(|&p| band.data[p] != 0))
 }
 
@@ -162,7 +162,7 @@ fn drop_blobs(mask: &Mask, drop: impl Fn(&[usize]) -> bool) -> Mask {
     out
 }
 
-fn and_not(a: &Mask, b: &Mask) -> Mask {
+pub(super) fn and_not(a: &Mask, b: &Mask) -> Mask {
     Mask {
         width: a.width,
         height: a.height,

@@ -99,9 +99,32 @@ impl EarlierSurvey {
         self.views.is_empty()
     }
 
+    /// Views already rendered: per view its camera, the twin's surface depth from it
+    /// (`surface_depth`) and its masks per class in `DamageClass::ALL` order.
+    pub fn from_views(views: Vec<(Camera, Vec<f32>, Vec<Mask>)>, radius_px: u32) -> EarlierSurvey {
+        EarlierSurvey {
+            views: views
+                .into_iter()
+                .map(|(camera, depth, masks)| EarlierView {
+                    camera,
+                    depth,
+                    masks,
+                })
+                .collect(),
+            radius_px: i64::from(radius_px),
+        }
+    }
+
     /// Whether the earlier survey showed damage of `class` at `point`: `None` when no earlier
     /// view sees the point, else whether at least half of the views that see it do.
     pub fn saw_damage(&self, point: Vec3, class: usize) -> Option<bool> {
+        let (seen, damaged) = self.votes(point, class);
+        (seen > 0).then_some(2 * damaged >= seen)
+    }
+
+    /// How many views see `point` (the twin's surface there is the point's), and how many of
+    /// those show damage of `class` within the radius of it.
+    pub fn votes(&self, point: Vec3, class: usize) -> (usize, usize) {
         let (mut seen, mut damaged) = (0usize, 0usize);
         for view in &self.views {
             let Some((x, y)) = view.camera.pixel_of(point) else {
@@ -126,7 +149,7 @@ impl EarlierSurvey {
             });
             damaged += usize::from(hit);
         }
-        (seen > 0).then_some(2 * damaged >= seen)
+        (seen, damaged)
     }
 
     /// Drops from `candidates` (one mask per class of a later view seen by `camera`, with the

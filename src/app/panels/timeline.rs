@@ -18,7 +18,7 @@ impl Default for TimelinePanel {
     fn default() -> Self {
         TimelinePanel {
             strategy: Strategy::Finetune,
-            iterations: 1000,
+            iterations: crate::timeline::update::UPDATE_ITERATIONS,
         }
     }
 }

@@ -21,7 +21,7 @@ pub struct Args {
     /// The resolution the update trains at.
     #[arg(long, default_value = "1", value_parser = parse_scale)]
     pub scale: ImageScale,
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = damage_twin::timeline::update::UPDATE_ITERATIONS)]
     pub iters: u32,
     /// Train on the photos as they are (no per-photo light compensation).
     #[arg(long)]
@@ -33,6 +33,13 @@ pub struct Args {
     /// their look better; new thin damage is learnt less: docs/TIMELINE.md).
     #[arg(long)]
     pub gentle_rates: bool,
+    /// Do not seed Gaussians for new damage before training (`timeline::seed`).
+    #[arg(long)]
+    pub no_seeds: bool,
+    /// A factor on the position, scale, rotation and opacity rates of the trained Gaussians that
+    /// are only neighbours of damage; damage and seeds learn at full rates (0: full for all).
+    #[arg(long, default_value_t = damage_twin::timeline::update::NEIGHBOUR_GEOMETRY_RATE)]
+    pub neighbour_geometry_rate: f32,
     /// The renderer that trains: cpu, gpu or auto (see `train --backend`).
     #[arg(long, default_value = "cpu")]
     pub backend: damage_twin::train::backend_choice::Backend,
@@ -54,6 +61,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     config.refine.max_scale_growth = (args.max_scale_growth > 0.0).then_some(args.max_scale_growth);
     config.refine.backend = args.backend;
+    config.refine.neighbour_geometry_rate =
+        (args.neighbour_geometry_rate > 0.0).then_some(args.neighbour_geometry_rate);
+    if args.no_seeds {
+        config.seeds = None;
+    }
     if args.gentle_rates {
         config.refine.lr = damage_twin::timeline::update::gentle_learning_rates();
     }
