@@ -94,6 +94,12 @@ impl EarlierSurvey {
         Ok(EarlierSurvey { views, radius_px })
     }
 
+    /// View `i`'s camera and the twin's surface depth from it (in `from_views` order).
+    pub fn view(&self, i: usize) -> (&Camera, &[f32]) {
+        let view = &self.views[i];
+        (&view.camera, &view.depth)
+    }
+
     /// True when no earlier view has masks: the survey gives no evidence.
     pub fn is_empty(&self) -> bool {
         self.views.is_empty()

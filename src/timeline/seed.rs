@@ -68,15 +68,11 @@ pub struct SeedReport {
     pub seeds: BTreeMap<String, usize>,
 }
 
-/// One training view as seeding sees it.
+/// What seeding keeps of one training view beside its camera, depth and masks (which the vote
+/// holds, in the same order).
 struct SeedView {
-    camera: crate::scene::Camera,
-    /// The twin's surface depth per pixel (NaN where it has none).
-    depth: Vec<f32>,
     /// The photo in the twin's light.
     photo: Vec<f32>,
-    /// The view's masks per class in `DamageClass::ALL` order.
-    masks: Vec<Mask>,
     /// Per class: the mask shows it and the twin's render does not.
     candidates: Vec<Mask>,
 }
@@ -99,6 +95,7 @@ pub fn seed_new_damage(
         return Ok(SeedReport::default());
     }
     let mut views = Vec::with_capacity(train_idx.len());
+    let mut voters = Vec::with_capacity(train_idx.len());
     for &index in train_idx {
         let mut loaded = dataset.load_view(index, scale)?;
         if loaded.masks.is_empty() {
@@ -126,28 +123,25 @@ pub fn seed_new_damage(
                 drop_small(&new, config.min_area_px)
             })
             .collect();
+        voters.push((loaded.camera, surface_depth(&out), masks));
         views.push(SeedView {
-            camera: loaded.camera,
-            depth: surface_depth(&out),
             photo: loaded.image.data,
-            masks,
             candidates,
         });
     }
-    Ok(plant(model, views, config))
+    let voters = EarlierSurvey::from_views(voters, config.radius_px);
+    Ok(plant(model, &voters, &views, config))
 }
 
-/// Lifts the candidates of `views`, keeps those most views agree on, and appends one seed per
-/// grid cell to `model`.
-fn plant(model: &mut Splats, views: Vec<SeedView>, config: &SeedConfig) -> SeedReport {
+/// Lifts the candidates of `views` (view `i` is `voters`' view `i`), keeps those most views
+/// agree on, and appends one seed per grid cell to `model`.
+fn plant(
+    model: &mut Splats,
+    voters: &EarlierSurvey,
+    views: &[SeedView],
+    config: &SeedConfig,
+) -> SeedReport {
     let mut report = SeedReport::default();
-    let voters = EarlierSurvey::from_views(
-        views
-            .iter()
-            .map(|v| (v.camera, v.depth.clone(), v.masks.clone()))
-            .collect(),
-        config.radius_px,
-    );
     // Lift, vote, and pool per grid cell.
     struct Point {
         position: Vec3,
@@ -155,8 +149,9 @@ fn plant(model: &mut Splats, views: Vec<SeedView>, config: &SeedConfig) -> SeedR
         footprint: f32,
     }
     let mut agreed: Vec<Vec<Point>> = (0..DamageClass::ALL.len()).map(|_| Vec::new()).collect();
-    for view in &views {
-        let fx = view.camera.intrinsics.fx;
+    for (i, view) in views.iter().enumerate() {
+        let (camera, depth) = voters.view(i);
+        let fx = camera.intrinsics.fx;
         for (class, mask) in view.candidates.iter().enumerate() {
             if !config.classes[class] {
                 continue;
@@ -166,11 +161,11 @@ fn plant(model: &mut Splats, views: Vec<SeedView>, config: &SeedConfig) -> SeedR
                     .candidates
                     .entry(DamageClass::ALL[class].id().to_string())
                     .or_default() += 1;
-                let z = view.depth[p];
+                let z = depth[p];
                 if !z.is_finite() {
                     continue;
                 }
-                let point = unproject(&view.camera, p, z);
+                let point = unproject(camera, p, z);
                 let (seen, damaged) = voters.votes(point, class);
                 if seen < config.min_views || 2 * damaged < seen {
                     continue;
@@ -178,7 +173,7 @@ fn plant(model: &mut Splats, views: Vec<SeedView>, config: &SeedConfig) -> SeedR
                 let footprint = z / fx;
                 // Half a footprint nearer the camera than the surface, so a seed sorts in front of
                 // the wall Gaussians whose centres lie on it.
-                let position = unproject(&view.camera, p, z - 0.5 * footprint);
+                let position = unproject(camera, p, z - 0.5 * footprint);
                 let c = &view.photo[p * 3..p * 3 + 3];
                 agreed[class].push(Point {
                     position,
@@ -242,9 +237,23 @@ mod tests {
     use super::*;
     use crate::scene::{Camera, Intrinsics};
 
+    /// Plants seeds from views made by `view`.
+    fn plant_views(model: &mut Splats, views: Vec<(SeedView, Voter)>) -> SeedReport {
+        let config = SeedConfig::default();
+        let (views, voters): (Vec<SeedView>, Vec<Voter>) = views.into_iter().unzip();
+        plant(
+            model,
+            &EarlierSurvey::from_views(voters, config.radius_px),
+            &views,
+            &config,
+        )
+    }
+
+    type Voter = (Camera, Vec<f32>, Vec<Mask>);
+
     /// A view of a wall at z = 5 from a camera at `x` looking along +z, with a crack mask along
     /// the world line x = 0 (`crack_line`) and optionally a blob no other view shows.
-    fn view(x: f32, crack_line: bool, blob: bool) -> SeedView {
+    fn view(x: f32, crack_line: bool, blob: bool) -> (SeedView, Voter) {
         let (w, h) = (40u32, 30u32);
         let k = Intrinsics {
             width: w,
@@ -272,13 +281,16 @@ mod tests {
             }
         }
         let empty = Mask::empty(w, h);
-        SeedView {
-            camera,
-            depth: vec![5.0; (w * h) as usize],
+        let seed_view = SeedView {
             photo: vec![0.2; (w * h * 3) as usize],
-            masks: vec![crack.clone(), empty.clone(), empty.clone()],
-            candidates: vec![crack, empty.clone(), empty],
-        }
+            candidates: vec![crack.clone(), empty.clone(), empty.clone()],
+        };
+        let voter = (
+            camera,
+            vec![5.0; (w * h) as usize],
+            vec![crack, empty.clone(), empty],
+        );
+        (seed_view, voter)
     }
 
     #[test]
@@ -289,7 +301,7 @@ mod tests {
             view(0.3, true, false),
             view(-0.3, true, false),
         ];
-        let report = plant(&mut model, views, &SeedConfig::default());
+        let report = plant_views(&mut model, views);
         let seeds = report.seeds.get("crack").copied().unwrap_or(0);
         assert!(seeds > 0, "{report:?}");
         assert_eq!(model.len(), seeds);
@@ -323,7 +335,7 @@ mod tests {
             view(0.3, false, false),
             view(-0.3, false, false),
         ];
-        let report = plant(&mut model, views, &SeedConfig::default());
+        let report = plant_views(&mut model, views);
         assert_eq!(model.len(), 0, "{report:?}");
         assert!(report.candidates["crack"] > 0);
     }

@@ -253,11 +253,6 @@ impl Adam {
         Ok(())
     }
 
-    /// Whether any group has per-Gaussian rates (a GPU step has no such factors).
-    pub fn has_rates(&self) -> bool {
-        self.rates.iter().any(Option::is_some)
-    }
-
     /// Gaussians tracked.
     pub fn len(&self) -> usize {
         self.len
