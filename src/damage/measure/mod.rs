@@ -385,7 +385,7 @@ fn region_from_cells(
             let (x, y) = (i % w - x0 + 1, i / w - y0 + 1);
             crop.data[y * crop.width + x] = true;
         }
-        skeleton_length(&thinned(&crop)) * cell
+        skeleton_length(&thinned(&crop), config.gap / cell) * cell
     });
     let area = cells.len() as f64 * cell * cell;
     let members: Vec<u32> = members.into_iter().filter(|&g| g != u32::MAX).collect();

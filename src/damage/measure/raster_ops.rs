@@ -158,8 +158,10 @@ pub fn thinned(image: &Bitmap) -> Bitmap {
 }
 
 /// Length of a skeleton in pixels: the minimum spanning forest over its 8-neighbour links
-/// (orthogonal links weigh 1, diagonal √2). A lone pixel counts 1.
-pub fn skeleton_length(skeleton: &Bitmap) -> f64 {
+/// (orthogonal links weigh 1, diagonal √2), then over straight links of at most `bridge` pixels
+/// between the pieces left apart, shortest first (a crack's centre line runs on through the
+/// few cells where the twin's label dips under the threshold). A lone pixel counts 1.
+pub fn skeleton_length(skeleton: &Bitmap, bridge: f64) -> f64 {
     let (w, h) = (skeleton.width, skeleton.height);
     let mut parent: Vec<usize> = (0..w * h).collect();
     fn find(parent: &mut [usize], mut i: usize) -> usize {
@@ -190,6 +192,39 @@ pub fn skeleton_length(skeleton: &Bitmap) -> f64 {
                         }
                     }
                 }
+            }
+        }
+    }
+    // Bridges between pieces, each pair of pixels once (the later pixel in raster order).
+    let reach = bridge.floor() as i64;
+    if reach >= 2 {
+        let mut bridges = Vec::new();
+        for y in 0..h as i64 {
+            for x in 0..w as i64 {
+                if !skeleton.get(x, y) {
+                    continue;
+                }
+                let a = find(&mut parent, y as usize * w + x as usize);
+                for dy in 0..=reach {
+                    for dx in -reach..=reach {
+                        if (dy == 0 && dx <= 0) || !skeleton.get(x + dx, y + dy) {
+                            continue;
+                        }
+                        let d = ((dx * dx + dy * dy) as f64).sqrt();
+                        let q = (y + dy) as usize * w + (x + dx) as usize;
+                        if d <= bridge && find(&mut parent, q) != a {
+                            bridges.push((d, y as usize * w + x as usize, q));
+                        }
+                    }
+                }
+            }
+        }
+        bridges.sort_by(|p, q| p.0.total_cmp(&q.0));
+        for (d, p, q) in bridges {
+            let (a, b) = (find(&mut parent, p), find(&mut parent, q));
+            if a != b {
+                parent[a] = b;
+                length += d;
             }
         }
     }
@@ -227,7 +262,7 @@ mod tests {
         ] {
             let mut image = Bitmap::new(200, 200);
             draw_line(&mut image, (10.0, 10.0), to, 3.0);
-            let length = skeleton_length(&thinned(&image));
+            let length = skeleton_length(&thinned(&image), 0.0);
             // The skeleton stops about a half-width short of each rounded end.
             assert!(
                 (length - expected).abs() < 0.05 * expected,
@@ -241,12 +276,39 @@ mod tests {
         let mut image = Bitmap::new(200, 120);
         draw_line(&mut image, (10.0, 60.0), (190.0, 60.0), 2.0);
         draw_line(&mut image, (100.0, 60.0), (100.0, 10.0), 2.0);
-        let length = skeleton_length(&thinned(&image));
+        let length = skeleton_length(&thinned(&image), 0.0);
         assert!((length - 230.0).abs() < 12.0, "{length}");
         let mut two = Bitmap::new(50, 10);
         draw_line(&mut two, (2.0, 5.0), (20.0, 5.0), 1.0);
         draw_line(&mut two, (30.0, 5.0), (48.0, 5.0), 1.0);
         assert_eq!(components(&two).1, 2);
         assert_eq!(components(&two.dilated(6)).1, 1);
+    }
+
+    #[test]
+    fn bridges_span_short_gaps_along_a_line_and_only_those() {
+        // A one-pixel line over x = 10..=186: dashes of 17 pixels, 3-pixel gaps.
+        let mut dashed = Bitmap::new(200, 40);
+        for x in 10..190 {
+            if (x - 10) % 20 < 17 {
+                dashed.data[20 * 200 + x] = true;
+            }
+        }
+        let pieces = skeleton_length(&dashed, 0.0);
+        assert!((pieces - 153.0).abs() < 1e-9, "{pieces}");
+        let bridged = skeleton_length(&dashed, 5.0);
+        assert!((bridged - 177.0).abs() < 1e-9, "{bridged}");
+        // Gaps wider than the bridge stay open.
+        assert!((skeleton_length(&dashed, 3.5) - pieces).abs() < 1e-9);
+
+        // Two parallel lines 10 pixels apart: a 5-pixel bridge joins neither.
+        let mut parallel = Bitmap::new(100, 40);
+        draw_line(&mut parallel, (10.0, 10.0), (90.0, 10.0), 1.0);
+        draw_line(&mut parallel, (10.0, 20.0), (90.0, 20.0), 1.0);
+        let skeleton = thinned(&parallel);
+        assert_eq!(
+            skeleton_length(&skeleton, 5.0),
+            skeleton_length(&skeleton, 0.0)
+        );
     }
 }
