@@ -132,6 +132,15 @@ fn stepping_detecting_updating_comparing_and_reopening_a_two_survey_project() {
         "the updated model is shown"
     );
     assert_eq!(std::fs::read(&first_model).expect("reads"), first_bytes);
+    // The update's progress is kept for the report's training chart: 20 steps of loss, and the
+    // held-out PSNR before and after.
+    let history = timeline
+        .twin
+        .load_history("2025")
+        .expect("reads the history")
+        .expect("the update kept its history");
+    assert!(history.series(|s| s.loss).len() >= 20, "{history:?}");
+    assert_eq!(history.evals.len(), 2, "{:?}", history.evals);
 
     // Compare with 2024: its model loads beside; the layers colour by the later survey.
     state.apply(Command::CompareSurvey(Some(0)));

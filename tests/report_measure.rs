@@ -9,6 +9,7 @@ use glam::{Quat, Vec3};
 use damage_twin::damage::DamageClass;
 use damage_twin::damage::measure::{MeasureConfig, measure_damage};
 use damage_twin::report::inspection::{InspectionReport, ReportSettings, report_html};
+use damage_twin::report::project_runs::project_runs;
 use damage_twin::scene::{Camera, Intrinsics};
 use damage_twin::splats::Splats;
 use damage_twin::timeline::quantities::{ReportRegion, SurveyQuantities, Totals};
@@ -188,6 +189,10 @@ fn report_json_follows_its_documented_schema() {
         },
         vec![survey],
         BTreeMap::new(),
+        project_runs(
+            "s1",
+            &serde_json::json!({"seconds": 12.0, "heldout_psnr": 24.5}),
+        ),
     );
     let json = serde_json::to_value(&report).unwrap();
     let schema_text = std::fs::read_to_string(
@@ -208,7 +213,7 @@ fn report_json_follows_its_documented_schema() {
     validate(&broken, &schema, "$", &mut errors);
     assert_eq!(errors.len(), 1, "{errors:?}");
 
-    let html = report_html(&report, &[]);
+    let html = report_html(&report, &[], &[]);
     assert!(html.starts_with("<!DOCTYPE html>") && html.ends_with("</html>"));
     assert!(html.contains("@media print") && html.contains("s1-crack-0"));
 }

@@ -13,10 +13,13 @@ use damage_twin::damage::measure::MeasureConfig;
 use damage_twin::report::inspection::{
     Figure, InspectionReport, ReportSettings, TruthTotals, report_html,
 };
+use damage_twin::report::project_runs::project_runs;
+use damage_twin::report::tradeoff_chart::tradeoff_svg;
+use damage_twin::report::training_chart::training_svg;
 use damage_twin::scene::atomic::write_atomic;
 use damage_twin::synth::quantities::Quantities;
 use damage_twin::timeline::quantities::survey_quantities;
-use damage_twin::timeline::twin::today;
+use damage_twin::timeline::twin::{HISTORY_FILE, today};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -97,23 +100,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let camera = camera.resized(camera.intrinsics.width / d, camera.intrinsics.height / d);
             let png =
                 png_bytes(&render_view(&splats, &camera, &style)).context("encoding a render")?;
-            figures.push(Figure {
-                caption: format!("survey {}, from {}: by class", s.survey, view.name),
+            figures.push(Figure::png(
+                format!("survey {}, from {}: by class", s.survey, view.name),
                 png,
-            });
+            ));
             // Damage by survey for half the views (earlier surveys blue, the latest its colour).
             if k % 2 == 0 {
                 let png = png_bytes(&render_view(&by_survey, &camera, &plain))
                     .context("encoding a render")?;
-                figures.push(Figure {
-                    caption: format!(
+                figures.push(Figure::png(
+                    format!(
                         "survey {}, from {}: by survey (blue earlier, {} {latest})",
                         s.survey,
                         view.name,
                         colour_name(latest_colour),
                     ),
                     png,
-                });
+                ));
             }
         }
         eprintln!(
@@ -126,6 +129,32 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             s.totals.spalling_area_m2,
             s.totals.rebar_length_m
         );
+    }
+
+    // What made each survey's model, and how its training went.
+    let mut runs = Vec::new();
+    let mut charts = Vec::new();
+    for survey in &twin.project.surveys {
+        if let Some(metrics) = twin.load_metrics(&survey.name)? {
+            runs.extend(project_runs(&survey.name, &metrics));
+        }
+        if let Some(history) = twin.load_history(&survey.name)? {
+            let name = twin.survey_dir(&survey.name).join(HISTORY_FILE);
+            charts.push(Figure::svg(
+                format!(
+                    "survey {}: training (loss, held-out PSNR, Gaussians)",
+                    survey.name
+                ),
+                training_svg(&name, &history)?,
+            ));
+        }
+    }
+    if !runs.is_empty() {
+        let points: Vec<_> = runs.iter().map(|r| r.point()).collect();
+        charts.push(Figure::svg(
+            "held-out IoU and PSNR against wall time, per step".to_string(),
+            tradeoff_svg(&args.out.join("report.html"), &points)?,
+        ));
     }
 
     let settings = ReportSettings {
@@ -142,6 +171,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         settings,
         surveys,
         truth,
+        runs,
     );
     let json = serde_json::to_string_pretty(&report)?;
     let json_path = args.out.join("report.json");
@@ -149,7 +179,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         std::io::Write::write_all(w, json.as_bytes())
     })?;
     let html_path = args.out.join("report.html");
-    let html = report_html(&report, &figures);
+    let html = report_html(&report, &figures, &charts);
     write_atomic(&html_path, |w| {
         std::io::Write::write_all(w, html.as_bytes())
     })?;

@@ -7,6 +7,7 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
+use crate::report::project_runs::ProjectRun;
 use crate::timeline::quantities::{ReportRegion, SurveyQuantities};
 
 /// `report.json`'s `schema` value; bumped when a field changes meaning or goes.
@@ -50,6 +51,8 @@ pub struct InspectionReport {
     pub surveys: Vec<SurveyQuantities>,
     /// Survey name → true totals, where the survey's dataset has them.
     pub truth: BTreeMap<String, TruthTotals>,
+    /// What made each survey's model: wall time and held-out scores (`report::project_runs`).
+    pub runs: Vec<ProjectRun>,
 }
 
 impl InspectionReport {
@@ -59,6 +62,7 @@ impl InspectionReport {
         settings: ReportSettings,
         surveys: Vec<SurveyQuantities>,
         truth: BTreeMap<String, TruthTotals>,
+        runs: Vec<ProjectRun>,
     ) -> InspectionReport {
         let totals = surveys
             .iter()
@@ -81,14 +85,34 @@ impl InspectionReport {
             totals,
             surveys,
             truth,
+            runs,
         }
     }
 }
 
-/// A render for the page: caption and PNG bytes.
+/// A picture for the page: caption, media type and bytes.
 pub struct Figure {
     pub caption: String,
-    pub png: Vec<u8>,
+    pub mime: &'static str,
+    pub data: Vec<u8>,
+}
+
+impl Figure {
+    pub fn png(caption: String, png: Vec<u8>) -> Figure {
+        Figure {
+            caption,
+            mime: "image/png",
+            data: png,
+        }
+    }
+
+    pub fn svg(caption: String, svg: String) -> Figure {
+        Figure {
+            caption,
+            mime: "image/svg+xml",
+            data: svg.into_bytes(),
+        }
+    }
 }
 
 const STYLE: &str = "body{font-family:system-ui,sans-serif;margin:2em;color:#222;max-width:70em}\
@@ -97,12 +121,13 @@ table{border-collapse:collapse;margin:.6em 0;font-size:.9em}\
 td,th{border:1px solid #ccc;padding:.25em .6em;text-align:right}th{background:#f2f2f2}\
 td.l,th.l{text-align:left}.new{color:#0a0;font-weight:600}.warn{color:#a60}\
 .figs{display:flex;flex-wrap:wrap;gap:.8em}figure{margin:0}figure{max-width:22em}figure img{width:22em;border:1px solid #ccc}\
-figcaption{font-size:.8em;color:#555}\
+figcaption{font-size:.8em;color:#555}.charts figure,.charts figure img{max-width:none;width:34em}\
 @media print{body{margin:0;max-width:none}h2{break-after:avoid}table,figure{break-inside:avoid}\
 figure{max-width:17em}figure img{width:17em}}";
 
-/// The page.
-pub fn report_html(report: &InspectionReport, figures: &[Figure]) -> String {
+/// The page: `figures` are the twin's renders, `charts` the training and speed-against-accuracy
+/// charts.
+pub fn report_html(report: &InspectionReport, figures: &[Figure], charts: &[Figure]) -> String {
     let unit = if report.settings.scale_known {
         "m"
     } else {
@@ -185,15 +210,11 @@ pub fn report_html(report: &InspectionReport, figures: &[Figure]) -> String {
     if !figures.is_empty() {
         h.push_str("<h2>The twin</h2><p>Damage coloured by class (crack red, spalling pink, rebar yellow) and by the survey it was first seen in.</p><div class=\"figs\">");
         for f in figures {
-            let _ = write!(
-                h,
-                "<figure><img alt=\"{c}\" src=\"data:image/png;base64,{}\"><figcaption>{c}</figcaption></figure>",
-                base64(&f.png),
-                c = escape(&f.caption)
-            );
+            h.push_str(&figure_html(f));
         }
         h.push_str("</div>");
     }
+    h.push_str(&runs_section(report, charts));
     for s in &report.surveys {
         let _ = write!(h, "<h2>Regions of survey {}</h2>", escape(&s.survey));
         h.push_str(&regions_table(&s.regions, unit));
@@ -207,6 +228,60 @@ pub fn report_html(report: &InspectionReport, figures: &[Figure]) -> String {
          </body></html>",
         st.metres_per_unit, st.label_threshold, st.map_cell_m, st.region_gap_m, st.plane_slab_m
     );
+    h
+}
+
+fn figure_html(f: &Figure) -> String {
+    format!(
+        "<figure><img alt=\"{c}\" src=\"data:{};base64,{}\"><figcaption>{c}</figcaption></figure>",
+        f.mime,
+        base64(&f.data),
+        c = escape(&f.caption)
+    )
+}
+
+/// What made each survey's model, as a table, and the charts.
+fn runs_section(report: &InspectionReport, charts: &[Figure]) -> String {
+    if report.runs.is_empty() && charts.is_empty() {
+        return String::new();
+    }
+    let mut h = String::from(
+        "<h2>Training and speed against accuracy</h2><p>What made each survey's model, scored on \
+         that survey's held-out photos: trained from its photos, or the earlier twin before and \
+         after the update with them.</p>",
+    );
+    if !report.runs.is_empty() {
+        let classes: std::collections::BTreeSet<&String> =
+            report.runs.iter().flat_map(|r| r.iou.keys()).collect();
+        h.push_str("<table><tr><th class=\"l\">Survey</th><th class=\"l\">Step</th><th>Wall time</th><th>PSNR</th>");
+        for c in &classes {
+            let _ = write!(h, "<th>{} IoU</th>", escape(c));
+        }
+        h.push_str("</tr>");
+        for r in &report.runs {
+            let _ = write!(
+                h,
+                "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{:.0} s</td><td>{}</td>",
+                escape(&r.survey),
+                escape(&r.step),
+                r.seconds,
+                r.psnr.map_or("–".to_string(), |p| format!("{p:.2} dB"))
+            );
+            for c in &classes {
+                let v = r.iou.get(*c).map_or("–".to_string(), |v| format!("{v:.3}"));
+                let _ = write!(h, "<td>{v}</td>");
+            }
+            h.push_str("</tr>");
+        }
+        h.push_str("</table>");
+    }
+    if !charts.is_empty() {
+        h.push_str("<div class=\"figs charts\">");
+        for f in charts {
+            h.push_str(&figure_html(f));
+        }
+        h.push_str("</div>");
+    }
     h
 }
 

@@ -3,6 +3,7 @@
 
 pub mod budget_chart;
 pub mod inspection;
+pub mod project_runs;
 pub mod stability_chart;
 pub mod study_chart;
 pub mod tradeoff_chart;

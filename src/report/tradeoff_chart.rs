@@ -1,7 +1,9 @@
-//! Speed against accuracy (DESIGN.md "Measuring"): per method one mark of held-out IoU (per
-//! class) and PSNR against wall time, as PNG and SVG, with the rows as CSV and a Markdown table.
-//! Presentation only: the figures arrive measured.
+//! Speed against accuracy (DESIGN.md "Measuring"): per method (or a project's step) one mark of
+//! held-out IoU (per class) and PSNR against wall time, as PNG and SVG files or an SVG string,
+//! with the hierarchy study's rows as CSV and a Markdown table. Presentation only: the figures
+//! arrive measured.
 
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -36,7 +38,28 @@ fn span(values: impl Iterator<Item = f64>, pad_fraction: f64) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
-fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, rows: &[HierarchyRow]) -> DrawResult
+/// One mark: what ran, its wall time, and what it reached (IoU per class where measured; PSNR
+/// NaN where not).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TradeoffPoint {
+    pub label: String,
+    pub seconds: f64,
+    pub iou: BTreeMap<String, f64>,
+    pub psnr: f64,
+}
+
+impl From<&HierarchyRow> for TradeoffPoint {
+    fn from(row: &HierarchyRow) -> TradeoffPoint {
+        TradeoffPoint {
+            label: row.method.name().to_string(),
+            seconds: row.seconds,
+            iou: row.iou.clone(),
+            psnr: row.psnr,
+        }
+    }
+}
+
+fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, rows: &[TradeoffPoint]) -> DrawResult
 where
     DB::ErrorType: 'static,
 {
@@ -80,7 +103,7 @@ where
             .zip(&points)
         {
             chart.draw_series(std::iter::once(Text::new(
-                row.method.name(),
+                row.label.clone(),
                 (sx, sy),
                 ("sans-serif", 12).into_font().color(&colour),
             )))?;
@@ -111,7 +134,7 @@ where
         let p = (row.seconds, row.psnr);
         chart.draw_series(std::iter::once(Circle::new(p, 5, blue.filled())))?;
         chart.draw_series(std::iter::once(Text::new(
-            row.method.name(),
+            row.label.clone(),
             p,
             ("sans-serif", 12).into_font().color(&blue),
         )))?;
@@ -126,16 +149,31 @@ pub fn write_tradeoff_chart(
     stem: &str,
     rows: &[HierarchyRow],
 ) -> Result<Vec<PathBuf>, ChartError> {
+    let points: Vec<TradeoffPoint> = rows.iter().map(TradeoffPoint::from).collect();
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
     draw(
         BitMapBackend::new(&png, (1200, 500)).into_drawing_area(),
-        rows,
+        &points,
     )
     .map_err(|e| ChartError::new(&png, e))?;
-    draw(SVGBackend::new(&svg, (1200, 500)).into_drawing_area(), rows)
-        .map_err(|e| ChartError::new(&svg, e))?;
+    draw(
+        SVGBackend::new(&svg, (1200, 500)).into_drawing_area(),
+        &points,
+    )
+    .map_err(|e| ChartError::new(&svg, e))?;
     Ok(vec![png, svg])
+}
+
+/// The chart as an SVG document, for a page (`name` says which in an error).
+pub fn tradeoff_svg(name: &Path, points: &[TradeoffPoint]) -> Result<String, ChartError> {
+    let mut svg = String::new();
+    draw(
+        SVGBackend::with_string(&mut svg, (1200, 500)).into_drawing_area(),
+        points,
+    )
+    .map_err(|e| ChartError::new(name, e))?;
+    Ok(svg)
 }
 
 fn classes(rows: &[HierarchyRow]) -> Vec<String> {

@@ -1,5 +1,6 @@
-//! Training curves as files (plotters): loss, held-out PSNR and Gaussian count against wall time,
-//! as PNG and SVG, from the same `History` the viewer's live charts draw. Presentation only.
+//! Training curves (plotters): loss, held-out PSNR and Gaussian count against wall time, as PNG
+//! and SVG files or an SVG string, from the same `History` the viewer's live charts draw.
+//! Presentation only.
 
 use std::path::Path;
 
@@ -20,7 +21,10 @@ fn range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
     if !(lo <= hi) {
         return None;
     }
-    let pad = ((hi - lo) * 0.05).max(1e-9);
+    // A flat series (the Gaussian count of an update) gets a band of 1 % around it.
+    let pad = ((hi - lo) * 0.05)
+        .max(hi.abs().max(lo.abs()) * 0.01)
+        .max(1e-9);
     Some((lo - pad, hi + pad))
 }
 
@@ -127,4 +131,15 @@ pub fn write_training_charts(
     )
     .map_err(|e| ChartError::new(&svg, e))?;
     Ok(vec![png, svg])
+}
+
+/// The curves as an SVG document, for a page (`name` says which in an error).
+pub fn training_svg(name: &Path, history: &History) -> Result<String, ChartError> {
+    let mut svg = String::new();
+    draw(
+        SVGBackend::with_string(&mut svg, (900, 720)).into_drawing_area(),
+        history,
+    )
+    .map_err(|e| ChartError::new(name, e))?;
+    Ok(svg)
 }

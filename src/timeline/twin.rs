@@ -6,15 +6,20 @@
 use std::path::{Component, Path, PathBuf};
 
 use serde::Serialize;
+use serde::de::DeserializeOwned;
 
 use crate::scene::atomic::write_atomic;
 use crate::scene::project::{PROJECT_FILE, Project, Survey, SurveyError};
 use crate::scene::{SceneError, ply};
 use crate::splats::Splats;
+use crate::train::history::History;
 
 /// File names inside a survey's folder.
 pub const MODEL_FILE: &str = "model.ply";
 pub const METRICS_FILE: &str = "metrics.json";
+/// The training history that made the survey's model (loss, held-out PSNR, Gaussians against
+/// wall time), for the report's charts.
+pub const HISTORY_FILE: &str = "history.json";
 
 #[derive(Debug, thiserror::Error)]
 pub enum TimelineError {
@@ -226,15 +231,50 @@ impl Twin {
         metrics: &impl Serialize,
     ) -> Result<PathBuf, TimelineError> {
         let index = self.survey_index(name)?;
+        let path = self.write_survey_json(name, METRICS_FILE, metrics)?;
+        self.project.surveys[index].metrics = Some(self.relative(&path));
+        Ok(path)
+    }
+
+    /// Survey `name`'s metrics, where recorded.
+    pub fn load_metrics(&self, name: &str) -> Result<Option<serde_json::Value>, TimelineError> {
+        let index = self.survey_index(name)?;
+        match &self.project.surveys[index].metrics {
+            Some(file) => read_json(&self.dir.join(file)).map(Some),
+            None => Ok(None),
+        }
+    }
+
+    /// Writes the training history that made survey `name`'s model
+    /// (`surveys/<name>/history.json`, atomically).
+    pub fn save_history(&self, name: &str, history: &History) -> Result<PathBuf, TimelineError> {
+        self.survey_index(name)?;
+        self.write_survey_json(name, HISTORY_FILE, history)
+    }
+
+    /// The training history of survey `name`'s model, where one was kept.
+    pub fn load_history(&self, name: &str) -> Result<Option<History>, TimelineError> {
+        let path = self.survey_dir(name).join(HISTORY_FILE);
+        if !path.is_file() {
+            return Ok(None);
+        }
+        read_json(&path).map(Some)
+    }
+
+    fn write_survey_json(
+        &self,
+        name: &str,
+        file: &str,
+        value: &impl Serialize,
+    ) -> Result<PathBuf, TimelineError> {
         let folder = self.survey_dir(name);
         std::fs::create_dir_all(&folder).map_err(|e| io_error(&folder, e))?;
-        let path = folder.join(METRICS_FILE);
-        let text = serde_json::to_string_pretty(metrics).map_err(|e| TimelineError::Io {
+        let path = folder.join(file);
+        let text = serde_json::to_string_pretty(value).map_err(|e| TimelineError::Io {
             path: path.clone(),
-            message: format!("cannot serialise the metrics: {e}"),
+            message: format!("cannot serialise: {e}"),
         })?;
         write_atomic(&path, |w| std::io::Write::write_all(w, text.as_bytes()))?;
-        self.project.surveys[index].metrics = Some(self.relative(&path));
         Ok(path)
     }
 
@@ -305,6 +345,15 @@ impl Twin {
             .find(|n| !taken(n))
             .unwrap_or_else(|| base.to_string())
     }
+}
+
+/// A JSON file of the project, read whole; a file that does not parse names itself.
+fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T, TimelineError> {
+    let text = std::fs::read_to_string(path).map_err(|e| io_error(path, e))?;
+    serde_json::from_str(&text).map_err(|e| TimelineError::Io {
+        path: path.to_path_buf(),
+        message: format!("not valid JSON here: {e}"),
+    })
 }
 
 fn io_error(path: &Path, e: std::io::Error) -> TimelineError {
@@ -454,5 +503,25 @@ mod tests {
             Err(TimelineError::Exists { .. })
         ));
         assert_eq!(reopened.unused_name("survey-1"), "survey-1-2");
+        assert_eq!(
+            reopened.load_metrics("survey-2").unwrap(),
+            Some(serde_json::json!({"psnr": 30.0}))
+        );
+        assert_eq!(reopened.load_metrics("survey-1").unwrap(), None);
+
+        // Training histories: none until saved; a damaged file is an error naming it.
+        assert!(reopened.load_history("survey-1").unwrap().is_none());
+        let mut history = History::default();
+        history.push_eval(crate::train::history::EvalSample {
+            wall_s: 1.0,
+            step: 10,
+            psnr: 24.0,
+        });
+        reopened.save_history("survey-1", &history).unwrap();
+        let back = reopened.load_history("survey-1").unwrap().unwrap();
+        assert_eq!(back.evals, history.evals);
+        std::fs::write(dir.join("surveys/survey-1").join(HISTORY_FILE), "{").unwrap();
+        let error = reopened.load_history("survey-1").unwrap_err().to_string();
+        assert!(error.contains(HISTORY_FILE), "{error}");
     }
 }

@@ -20,6 +20,7 @@ use crate::timeline::appearance::{fit_transform, unchanged_pixels};
 use crate::timeline::changes::without_near_floaters;
 use crate::timeline::seed::{SeedConfig, SeedReport, seed_new_damage};
 use crate::timeline::twin::{TimelineError, Twin};
+use crate::train::history::{EvalSample, History};
 use crate::train::job::{Job, JobContext, JobError, JobOptions};
 use crate::train::views::split_views;
 
@@ -142,6 +143,22 @@ pub fn record_update(
     twin.project.surveys[index].appearance = outcome.report.appearance;
     twin.save()?;
     Ok(path)
+}
+
+impl UpdateReport {
+    /// Adds the held-out PSNR before (at 0 s) and after (at `seconds`, the wall time the update's
+    /// progress was recorded against) to the update's progress `history`.
+    pub fn record_scores(&self, history: &mut History, seconds: f64) {
+        if let Some(psnr) = self.refine.before.psnr {
+            let before = EvalSample {
+                wall_s: 0.0,
+                step: 0,
+                psnr,
+            };
+            history.evals.insert(0, before);
+        }
+        history.record_final(self.refine.after.psnr, seconds);
+    }
 }
 
 /// Tags damage Gaussians with no survey yet as first seen in `survey` (label probability above

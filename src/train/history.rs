@@ -2,33 +2,42 @@
 //! PSNR and Gaussian count against wall time, bounded in memory by thinning old samples. Data
 //! only; it is filled from job progress here, in one place, for the viewer and the CLI alike.
 
-use serde::Serialize;
+use serde::{Deserialize, Deserializer, Serialize};
 
 use crate::train::job::Progress;
 
 /// One progress report of a training run.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Sample {
     /// Seconds since the run started.
     pub wall_s: f64,
     pub step: u32,
+    /// NaN in the phases that do not train (JSON: null).
+    #[serde(deserialize_with = "nan_when_null")]
     pub loss: f64,
-    /// Training-batch PSNR, dB (NaN when not reported).
+    /// Training-batch PSNR, dB (NaN when not reported; JSON: null).
+    #[serde(deserialize_with = "nan_when_null")]
     pub psnr: f64,
     pub gaussians: usize,
 }
 
 /// A held-out evaluation during or after training.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvalSample {
     pub wall_s: f64,
     pub step: u32,
+    #[serde(deserialize_with = "nan_when_null")]
     pub psnr: f64,
+}
+
+/// serde_json writes NaN as null; read it back as NaN.
+fn nan_when_null<'de, D: Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(deserializer)?.unwrap_or(f64::NAN))
 }
 
 /// Bounded history: when full, every other sample of the older half is dropped, so the curve
 /// keeps its shape over long runs.
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct History {
     pub samples: Vec<Sample>,
     pub evals: Vec<EvalSample>,
@@ -113,5 +122,35 @@ impl History {
             .map(|s| [s.wall_s, value(s)])
             .filter(|p| p[1].is_finite())
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_history_survives_json_with_its_gaps() {
+        let mut history = History::default();
+        for (step, loss) in [(0, f64::NAN), (1, 0.5), (2, 0.25)] {
+            history.push(Sample {
+                wall_s: f64::from(step) * 0.1,
+                step,
+                loss,
+                psnr: f64::NAN,
+                gaussians: 10 + step as usize,
+            });
+        }
+        history.push_eval(EvalSample {
+            wall_s: 0.2,
+            step: 2,
+            psnr: 21.5,
+        });
+        let text = serde_json::to_string(&history).expect("serialise");
+        let back: History = serde_json::from_str(&text).expect("read back");
+        assert_eq!(back.series(|s| s.loss), vec![[0.1, 0.5], [0.2, 0.25]]);
+        assert!(back.samples.iter().all(|s| s.psnr.is_nan()));
+        assert_eq!(back.evals, history.evals);
+        assert_eq!(back.samples.len(), 3);
     }
 }

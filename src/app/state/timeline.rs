@@ -21,6 +21,7 @@ use crate::timeline::detect_survey::{
     ChangeSummary, DetectOptions, change_map_path, compared_survey, detect_job,
 };
 use crate::timeline::update::{UpdateConfig, UpdateOutcome, update_project_job};
+use crate::train::history::History;
 use crate::train::job::{Job, JobEvent, JobOptions, Progress};
 
 /// A survey loaded into the viewer.
@@ -45,6 +46,9 @@ pub struct TimelineJob {
     /// The survey it works on.
     pub survey: usize,
     pub progress: Option<Progress>,
+    /// The job's progress against wall time, kept with the updated survey for the report.
+    pub history: History,
+    pub started: std::time::Instant,
 }
 
 impl TimelineJob {
@@ -321,6 +325,8 @@ impl AppState {
             work: TimelineWork::Detect(job),
             survey,
             progress: None,
+            history: History::default(),
+            started: std::time::Instant::now(),
         });
         self.log_line(format!(
             "detecting the changes of {name} against the twin of {previous}"
@@ -364,6 +370,8 @@ impl AppState {
             work: TimelineWork::Update(job),
             survey,
             progress: None,
+            history: History::default(),
+            started: std::time::Instant::now(),
         });
         if unsaved {
             self.log_line("note: the update starts from the earlier survey's saved model, not its unsaved edits");
@@ -409,7 +417,11 @@ impl AppState {
             };
             changed = true;
             match event {
-                JobEvent::Progress(p) => job.progress = Some(p),
+                JobEvent::Progress(p) => {
+                    job.history
+                        .record_progress(&p, job.started.elapsed().as_secs_f64());
+                    job.progress = Some(p);
+                }
                 JobEvent::Log(line) => self.log_line(format!("update: {line}")),
                 JobEvent::NanRolledBack { step, reason } => {
                     self.log_line(format!("update: step {step} rolled back ({reason})"));
@@ -420,8 +432,10 @@ impl AppState {
                     }
                 }
                 JobEvent::Finished(done) => {
+                    let history = std::mem::take(&mut job.history);
+                    let seconds = job.started.elapsed().as_secs_f64();
                     self.end_timeline_job();
-                    self.finish_timeline_job(survey, done);
+                    self.finish_timeline_job(survey, done, history, seconds);
                 }
                 JobEvent::Failed(error) => {
                     self.end_timeline_job();
@@ -450,7 +464,13 @@ impl AppState {
         }
     }
 
-    fn finish_timeline_job(&mut self, survey: usize, done: Done) {
+    fn finish_timeline_job(
+        &mut self,
+        survey: usize,
+        done: Done,
+        mut history: History,
+        seconds: f64,
+    ) {
         match done {
             Done::Detect(done) => {
                 let (twin, summary) = *done;
@@ -489,6 +509,10 @@ impl AppState {
                     "updated {} from {} in {:.0} s: {} new-damage Gaussians, {} old",
                     r.survey, r.previous, r.seconds, r.new_damage_gaussians, r.old_damage_gaussians
                 ));
+                r.record_scores(&mut history, seconds);
+                if let Err(e) = twin.save_history(&r.survey, &history) {
+                    self.log_line(format!("the update's training history was not kept: {e}"));
+                }
                 let model = Arc::new(outcome.splats);
                 let Some(t) = &mut self.timeline else {
                     return;

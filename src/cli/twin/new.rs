@@ -11,6 +11,7 @@ use damage_twin::damage::setup::{RunConfig, train_job};
 use damage_twin::scene::ImageScale;
 use damage_twin::timeline::Twin;
 use damage_twin::timeline::update::tag_damage;
+use damage_twin::train::history::History;
 use damage_twin::train::job::JobOptions;
 
 use crate::cli::args::{drive, open_dataset, parse_scale, read_model};
@@ -56,7 +57,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 ..RunConfig::default()
             };
             let job = train_job(dataset, config, JobOptions::headless(args.threads));
-            let outcome = drive(job, "training", args.quiet, |_| {})?;
+            let started = std::time::Instant::now();
+            let mut history = History::default();
+            let outcome = drive(job, "training", args.quiet, |p| {
+                history.record_progress(p, started.elapsed().as_secs_f64())
+            })?;
+            history.record_final(
+                outcome.heldout.as_ref().map(|s| s.psnr),
+                started.elapsed().as_secs_f64(),
+            );
+            twin.save_history(&args.survey, &history)?;
             let metrics = serde_json::json!({
                 "heldout_psnr": outcome.heldout.as_ref().map(|s| s.psnr),
                 "heldout_ssim": outcome.heldout.as_ref().map(|s| s.ssim),

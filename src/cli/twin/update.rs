@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use damage_twin::damage::refine::Strategy;
 use damage_twin::scene::ImageScale;
 use damage_twin::timeline::update::{UpdateConfig, update_project_job};
+use damage_twin::train::history::History;
 use damage_twin::train::job::JobOptions;
 
 use crate::cli::args::{drive, parse_scale};
@@ -75,7 +76,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         config,
         JobOptions::headless(args.threads),
     );
-    let (twin, outcome) = drive(job, "update", args.quiet, |_| {})?;
+    let started = std::time::Instant::now();
+    let mut history = History::default();
+    let (twin, outcome) = drive(job, "update", args.quiet, |p| {
+        history.record_progress(p, started.elapsed().as_secs_f64())
+    })?;
+    outcome
+        .report
+        .record_scores(&mut history, started.elapsed().as_secs_f64());
+    twin.save_history(&args.survey, &history)?;
     let path = twin
         .model_path(&args.survey)?
         .unwrap_or_else(|| twin.survey_dir(&args.survey));
