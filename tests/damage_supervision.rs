@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 use damage_twin::damage::evaluate::{DamageReadout, evaluate_damage};
 use damage_twin::damage::reference::{load_reference_views, reference_source};
 use damage_twin::damage::setup::{RunConfig, prepare_run};
-use damage_twin::damage::study::{NoiseModel, StudyConfig, run_study};
+use damage_twin::damage::study::{NoiseModel, StudyConfig, StudyStage, run_study};
 use damage_twin::damage::{DamageClass, Palette, TrainMode};
 use damage_twin::metrics::MaskAgreement;
 use damage_twin::scene::open::OpenOptions;
@@ -206,6 +206,8 @@ fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks
         noise: NoiseModel::Views,
         noise_seed: 5,
         threads: None,
+        fine_iterations: 0,
+        fine_work_dir: std::env::temp_dir(),
     };
     let mut finished = 0;
     let rows = run_study(survey(), &study, &mut |event| {
@@ -242,13 +244,35 @@ fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks
         }
     }
 
-    // The paper's model: every view corrupted by 0.4 × its own damage area per class.
+    // The paper's model: every view corrupted by 0.4 × its own damage area per class; the
+    // label-mode twin also refined at the photos' resolution on masks corrupted there.
+    let work = tempfile::tempdir().expect("temp dir");
     let area = StudyConfig {
         rates: vec![0.4],
         noise: NoiseModel::Area,
+        run: config(TrainMode::Label, 800),
+        fine_iterations: 20,
+        fine_work_dir: work.path().to_path_buf(),
         ..study
     };
-    let rows = run_study(survey(), &area, &mut |_| {}).expect("study runs");
+    let mut fine_errors = Vec::new();
+    let rows = run_study(survey(), &area, &mut |event| {
+        if let damage_twin::damage::study::StudyEvent::FineFailed { error, .. } = event {
+            fine_errors.push(error);
+        }
+    })
+    .expect("study runs");
+    assert!(fine_errors.is_empty(), "{fine_errors:?}");
+    let stages: Vec<StudyStage> = rows.iter().map(|r| r.stage).collect();
+    assert!(
+        stages.contains(&StudyStage::Coarse) && stages.contains(&StudyStage::Finetune),
+        "{stages:?}"
+    );
+    assert_eq!(
+        std::fs::read_dir(work.path()).expect("lists").count(),
+        0,
+        "the fine-tune's corrupted masks are removed after it"
+    );
     for r in rows.iter().filter(|r| r.class != DamageClass::Rebar) {
         eprintln!("{r:?}");
         assert_eq!(r.noisy_views, 21, "every training view");

@@ -27,3 +27,4 @@ pub use crate::scene::damage_class::{DamageClass, NEW_DAMAGE_COLOUR};
 pub use mode::TrainMode;
 pub use palette::Palette;
 pub mod study;
+pub mod study_fine;

@@ -6,7 +6,9 @@
 //! each mode and its rendered masks are compared with the clean ones: of the pixels the
 //! corruption got wrong, the share it puts right (errors corrected); of those it left right, the
 //! share the twin gets wrong (errors introduced); and IoU on the training views (does multi-view
-//! consistency outvote the errors?) and on held-out views (does the twin generalise?).
+//! consistency outvote the errors?) and on held-out views (does the twin generalise?). Each
+//! label-mode twin may also be refined at the photos' resolution and scored there
+//! (`study_fine`), where a one-pixel crack is above the pixel grid.
 
 use std::time::Instant;
 
@@ -19,6 +21,7 @@ use crate::damage::reference::{ReferenceSource, load_reference_views, reference_
 use crate::damage::setup::{
     RunConfig, apply_mode, model_and_spec, overlay_colours, prepare_targets,
 };
+use crate::damage::study_fine::fine_rows;
 use crate::damage::{DamageClass, Palette, TrainMode};
 use crate::metrics::MaskAgreement;
 use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
@@ -52,6 +55,25 @@ impl std::str::FromStr for NoiseModel {
     }
 }
 
+/// Which twin a row scores: the coarse one trained on the corrupted masks, or that twin refined
+/// at the photos' resolution on them (`study_fine`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StudyStage {
+    #[default]
+    Coarse,
+    Finetune,
+}
+
+impl std::fmt::Display for StudyStage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            StudyStage::Coarse => "coarse",
+            StudyStage::Finetune => "finetune",
+        })
+    }
+}
+
 /// The study's settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StudyConfig {
@@ -65,12 +87,19 @@ pub struct StudyConfig {
     /// Seed of the corruption (which views, which blobs).
     pub noise_seed: u64,
     pub threads: Option<usize>,
+    /// Steps of the full-resolution fine-tune of each label-mode twin (0: none).
+    pub fine_iterations: u32,
+    /// Where the fine-tune's corrupted full-resolution masks are written while it runs.
+    pub fine_work_dir: std::path::PathBuf,
 }
 
 /// One (mode, rate, class) result.
 #[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct StudyRow {
     pub mode: TrainMode,
+    /// Rows written before the fine-tune stage existed are coarse.
+    #[serde(default)]
+    pub stage: StudyStage,
     pub rate: f32,
     pub class: DamageClass,
     /// IoU of the corrupted training masks against the clean ones.
@@ -138,14 +167,23 @@ pub enum StudyEvent {
         run: usize,
         rows: Vec<StudyRow>,
     },
+    /// The full-resolution fine-tune of the label-mode twin at `rate` began.
+    FineStarted {
+        rate: f32,
+    },
+    /// It could not run (no damage Gaussians to refine, say): no fine-tune rows at `rate`.
+    FineFailed {
+        rate: f32,
+        error: String,
+    },
 }
 
 /// Clean masks of the training views and what is needed to corrupt them.
-struct CleanTraining {
-    views: Vec<TrainView>,
+pub(crate) struct CleanTraining {
+    pub(crate) views: Vec<TrainView>,
     /// Per view, where added blobs may be centred (not sky), when the dataset says.
     building: Vec<Vec<bool>>,
-    reference: Vec<ReferenceView>,
+    pub(crate) reference: Vec<ReferenceView>,
 }
 
 /// Runs the study on `dataset` (which must have masks; a synthetic survey's `truth/` is used as
@@ -253,13 +291,35 @@ pub fn run_study(
                 rows: run_rows.clone(),
             });
             rows.extend(run_rows);
+            if mode == TrainMode::Label && config.fine_iterations > 0 {
+                on_event(StudyEvent::FineStarted { rate });
+                // A twin that shows no damage to refine is a finding of its own, not the end of
+                // the study.
+                match fine_rows(
+                    dataset,
+                    &source,
+                    config,
+                    rate,
+                    &outcome.splats,
+                    (&train_indices, &heldout_indices),
+                ) {
+                    Ok(fine) => {
+                        on_event(StudyEvent::RunFinished {
+                            run,
+                            rows: fine.clone(),
+                        });
+                        rows.extend(fine);
+                    }
+                    Err(error) => on_event(StudyEvent::FineFailed { rate, error }),
+                }
+            }
             run += 1;
         }
     }
     Ok(rows)
 }
 
-fn load_clean_training(
+pub(crate) fn load_clean_training(
     dataset: &Dataset,
     source: &ReferenceSource,
     indices: &[usize],
@@ -311,7 +371,7 @@ fn structure_pixels(dataset: &Dataset, name: &str, width: u32, height: u32) -> V
 }
 
 /// The training masks at `rate`: which views are noisy, and per view per class the masks.
-fn corrupt(
+pub(crate) fn corrupt(
     clean: &CleanTraining,
     noise: NoiseModel,
     rate: f32,
@@ -350,7 +410,7 @@ fn corrupt(
 
 /// Agreement of the corrupted training masks with the clean ones, per class, over every
 /// training view or (with `only`) over the flagged ones.
-fn agreement(
+pub(crate) fn agreement(
     corrupted: &[Vec<Mask>],
     clean: &[ReferenceView],
     only: Option<&[bool]>,
@@ -366,7 +426,7 @@ fn agreement(
 
 /// The twin on the training views: against the clean masks on every view and on the corrupted
 /// views only, and per class how many of the corrupted pixels (input ≠ clean) it renders right.
-struct TrainingScores {
+pub(crate) struct TrainingScores {
     all: DamageScores,
     noisy: DamageScores,
     /// Per class in `DamageClass::ALL` order: (corrupted pixels the twin renders as the clean
@@ -377,7 +437,7 @@ struct TrainingScores {
     introduced: [(u64, u64); 3],
 }
 
-fn score_training_views(
+pub(crate) fn score_training_views(
     splats: &crate::splats::Splats,
     clean: &CleanTraining,
     corrupted: &[Vec<Mask>],
@@ -425,13 +485,13 @@ fn score_training_views(
 }
 
 /// The corrupted inputs' agreement with the clean masks.
-struct Inputs<'a> {
-    all: &'a DamageScores,
-    noisy: &'a DamageScores,
-    noisy_views: usize,
+pub(crate) struct Inputs<'a> {
+    pub(crate) all: &'a DamageScores,
+    pub(crate) noisy: &'a DamageScores,
+    pub(crate) noisy_views: usize,
 }
 
-fn heldout_psnr(
+pub(crate) fn heldout_psnr(
     dataset: &Dataset,
     indices: &[usize],
     config: &RunConfig,
@@ -449,7 +509,7 @@ fn heldout_psnr(
 }
 
 #[allow(clippy::too_many_arguments)]
-fn rows_for(
+pub(crate) fn rows_for(
     mode: TrainMode,
     rate: f32,
     input: &Inputs,
@@ -484,6 +544,7 @@ fn rows_for(
             };
             StudyRow {
                 mode,
+                stage: StudyStage::Coarse,
                 rate,
                 class,
                 input_iou: figure(input.all, class, MaskAgreement::iou),

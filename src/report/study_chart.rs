@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::damage::study::StudyRow;
+use crate::damage::study::{StudyRow, StudyStage};
 use crate::damage::{DamageClass, TrainMode};
 use crate::report::ChartError;
 
@@ -256,6 +256,13 @@ pub fn write_study_chart(
     stem: &str,
     rows: &[StudyRow],
 ) -> Result<Vec<PathBuf>, ChartError> {
+    // The chart compares modes on the coarse twins; the fine-tune rows are in the tables.
+    let rows: Vec<StudyRow> = rows
+        .iter()
+        .filter(|r| r.stage == StudyStage::Coarse)
+        .cloned()
+        .collect();
+    let rows = &rows[..];
     let width = 520 * classes(rows).len().max(1) as u32;
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
@@ -275,8 +282,8 @@ pub fn write_study_chart(
 /// The rows as a Markdown table (for docs/).
 pub fn study_table(rows: &[StudyRow]) -> String {
     let mut text = String::from(
-        "| mode | rate | class | input IoU | twin IoU (train views) | twin IoU (held-out) | twin F1 (held-out) | input IoU (corrupted views) | twin IoU (corrupted views) | errors corrected | errors introduced |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| mode | stage | rate | class | input IoU | twin IoU (train views) | twin IoU (held-out) | twin F1 (held-out) | input IoU (corrupted views) | twin IoU (corrupted views) | errors corrected | errors introduced |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     // No corrupted views at rate 0: those columns have nothing to show.
     let value = |v: f64| {
@@ -303,8 +310,9 @@ pub fn study_table(rows: &[StudyRow]) -> String {
         };
         let _ = writeln!(
             text,
-            "| {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.mode,
+            r.stage,
             r.rate,
             r.class,
             value(r.input_iou),
@@ -323,15 +331,16 @@ pub fn study_table(rows: &[StudyRow]) -> String {
 /// The rows as CSV.
 pub fn study_csv(rows: &[StudyRow]) -> String {
     let mut text = String::from(
-        "mode,rate,class,input_iou,twin_iou_train,twin_iou_heldout,twin_f1_heldout,\
+        "mode,stage,rate,class,input_iou,twin_iou_train,twin_iou_heldout,twin_f1_heldout,\
          twin_precision_heldout,twin_recall_heldout,input_iou_noisy_views,twin_iou_noisy_views,\
          corrupted_pixels,errors_corrected,errors_introduced,noisy_views,train_seconds,gaussians,heldout_psnr\n",
     );
     for r in rows {
         let _ = writeln!(
             text,
-            "{},{},{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.5},{:.5},{},{:.2},{},{}",
+            "{},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.5},{:.5},{},{:.2},{},{}",
             r.mode,
+            r.stage,
             r.rate,
             r.class,
             r.input_iou,

@@ -1,0 +1,153 @@
+//! The mask-noise study's full-resolution stage: at the coarse resolution a one-pixel crack is
+//! below the pixel grid, so the coarse twin's crack figures say more about the grid than about
+//! the errors. Here the label-mode coarse twin is refined as the hierarchical method refines it
+//! (select its damage Gaussians, hulls, fine-tune inside them at the photos' resolution) on the
+//! photos' masks corrupted the same way at that resolution, and scored there against the clean
+//! masks: errors corrected and introduced on the training views, IoU on training and held-out
+//! views.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use crate::damage::DamageClass;
+use crate::damage::TrainMode;
+use crate::damage::evaluate::{DamageReadout, evaluate_damage};
+use crate::damage::reference::{ReferenceSource, load_reference_views};
+use crate::damage::refine::{RefineConfig, Strategy, refine};
+use crate::damage::select::SelectConfig;
+use crate::damage::study::{
+    Inputs, StudyConfig, StudyRow, StudyStage, agreement, corrupt, heldout_psnr,
+    load_clean_training, rows_for, score_training_views,
+};
+use crate::scene::{Dataset, ImageScale, Mask};
+use crate::splats::Splats;
+use crate::train::job::{Job, JobOptions};
+
+/// The resolution the stage refines and scores at: the photos'.
+const FINE_SCALE: ImageScale = ImageScale::Factor(1);
+
+/// The label-mode coarse twin `coarse`, trained on masks corrupted at `rate`, refined at full
+/// resolution for `config.fine_iterations` steps and scored. The corrupted full-resolution
+/// masks are written under `config.fine_work_dir` for the refinement to read, and removed after.
+pub(crate) fn fine_rows(
+    dataset: &Dataset,
+    source: &ReferenceSource,
+    config: &StudyConfig,
+    rate: f32,
+    coarse: &Splats,
+    (train_indices, heldout_indices): (&[usize], &[usize]),
+) -> Result<Vec<StudyRow>, String> {
+    let started = Instant::now();
+    let mut fine_config = config.clone();
+    fine_config.run.scale = FINE_SCALE;
+    let clean = load_clean_training(dataset, source, train_indices, &fine_config)?;
+    let heldout = load_reference_views(dataset, source, heldout_indices, FINE_SCALE)
+        .map_err(|e| e.to_string())?;
+    // Another draw of the same noise model: the photos' masks, not the coarse ones upsampled.
+    let (noisy, corrupted) = corrupt(&clean, config.noise, rate, config.noise_seed ^ 0xF1E);
+
+    let masks_dir = config.fine_work_dir.join(format!("masks-rate-{rate:.2}"));
+    for (view, masks) in clean.views.iter().zip(&corrupted) {
+        write_view_masks(&masks_dir, &view.name, masks.iter().map(Some))?;
+    }
+    // Held-out views keep their clean masks: the refinement scores itself on them.
+    for view in &heldout {
+        write_view_masks(
+            &masks_dir,
+            &view.name,
+            view.reference.iter().map(Option::as_ref),
+        )?;
+    }
+    let mut fine_dataset = dataset.clone();
+    fine_dataset.masks_dir = Some(masks_dir.clone());
+
+    let refine_config = RefineConfig {
+        select: SelectConfig {
+            mode: TrainMode::Label,
+            ..SelectConfig::default()
+        },
+        strategy: Strategy::Finetune,
+        scale: FINE_SCALE,
+        select_scale: config.run.scale,
+        iterations: config.fine_iterations,
+        holdout: config.run.holdout.clone(),
+        background: config.run.background,
+        seed: config.run.seed,
+        label_weight: config.run.label_weight,
+        ..RefineConfig::default()
+    };
+    let dataset_arc = Arc::new(fine_dataset);
+    let model = coarse.clone();
+    let job = Job::spawn("refine", JobOptions::headless(config.threads), move |ctx| {
+        refine(ctx, &dataset_arc, &model, &refine_config)
+    });
+    let outcome = job.wait();
+    let removed = std::fs::remove_dir_all(&masks_dir);
+    let outcome = outcome.map_err(|e| format!("full-resolution fine-tune at rate {rate}: {e}"))?;
+    removed.map_err(|e| format!("{}: {e}", masks_dir.display()))?;
+    let refined = &outcome.splats;
+
+    let readout = DamageReadout {
+        mode: TrainMode::Label,
+        ..DamageReadout::for_model(refined, config.run.palette)
+    };
+    let training = score_training_views(
+        refined,
+        &clean,
+        &corrupted,
+        &noisy,
+        &readout,
+        config.run.background,
+    );
+    let heldout_scores = evaluate_damage(refined, &heldout, &readout, config.run.background);
+    let input = agreement(&corrupted, &clean.reference, None);
+    let input_noisy = agreement(&corrupted, &clean.reference, Some(&noisy));
+    let mut fine_run = fine_config.run.clone();
+    fine_run.mode = TrainMode::Label;
+    let psnr = heldout_psnr(dataset, heldout_indices, &fine_run, refined);
+    let inputs = Inputs {
+        all: &input,
+        noisy: &input_noisy,
+        noisy_views: noisy.iter().filter(|&&n| n).count(),
+    };
+    let mut rows = rows_for(
+        TrainMode::Label,
+        rate,
+        &inputs,
+        &training,
+        &heldout_scores,
+        started.elapsed().as_secs_f64(),
+        refined.len(),
+        psnr,
+    );
+    for row in &mut rows {
+        row.stage = StudyStage::Finetune;
+    }
+    Ok(rows)
+}
+
+/// A view's masks (`DamageClass::ALL` order; None: no mask of that class) as
+/// `dir/<class>/<name>.png`, 0 / 255 grey.
+fn write_view_masks<'a>(
+    dir: &Path,
+    name: &str,
+    masks: impl Iterator<Item = Option<&'a Mask>>,
+) -> Result<(), String> {
+    for (class, mask) in DamageClass::ALL.iter().zip(masks) {
+        let Some(mask) = mask else { continue };
+        let folder: PathBuf = dir.join(class.id());
+        std::fs::create_dir_all(&folder).map_err(|e| format!("{}: {e}", folder.display()))?;
+        let path = folder.join(format!("{name}.png"));
+        let grey: Vec<u8> = mask
+            .data
+            .iter()
+            .map(|&v| if v != 0 { 255 } else { 0 })
+            .collect();
+        image::GrayImage::from_raw(mask.width, mask.height, grey)
+            .ok_or_else(|| format!("{}: mask size mismatch", path.display()))?
+            .save(&path)
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+    }
+    Ok(())
+}
