@@ -216,6 +216,13 @@ fn report_json_follows_its_documented_schema() {
     let html = report_html(&report, &[], &[]);
     assert!(html.starts_with("<!DOCTYPE html>") && html.ends_with("</html>"));
     assert!(html.contains("@media print") && html.contains("s1-crack-0"));
+    // The run that made the model, in the speed-against-accuracy table.
+    assert!(
+        html.contains("Training and speed against accuracy")
+            && html.contains("<td class=\"l\">trained</td><td>12 s</td><td>24.50 dB</td>"),
+        "{html}"
+    );
+    assert_eq!(json["runs"][0]["step"], "trained");
 }
 
 /// The subset of JSON Schema the documented schema uses: type (one or a list), required,

@@ -48,16 +48,24 @@ pub(crate) fn fine_rows(
     let (noisy, corrupted) = corrupt(&clean, config.noise, rate, config.noise_seed ^ 0xF1E);
 
     let masks_dir = config.fine_work_dir.join(format!("masks-rate-{rate:.2}"));
-    for (view, masks) in clean.views.iter().zip(&corrupted) {
-        write_view_masks(&masks_dir, &view.name, masks.iter().map(Some))?;
-    }
-    // Held-out views keep their clean masks: the refinement scores itself on them.
-    for view in &heldout {
-        write_view_masks(
-            &masks_dir,
-            &view.name,
-            view.reference.iter().map(Option::as_ref),
-        )?;
+    let written = (|| {
+        for (view, masks) in clean.views.iter().zip(&corrupted) {
+            write_view_masks(&masks_dir, &view.name, masks.iter().map(Some))?;
+        }
+        // Held-out views keep their clean masks: the refinement scores itself on them.
+        for view in &heldout {
+            write_view_masks(
+                &masks_dir,
+                &view.name,
+                view.reference.iter().map(Option::as_ref),
+            )?;
+        }
+        Ok::<(), String>(())
+    })();
+    if let Err(error) = written {
+        // Best effort: the error above is the one to report.
+        let _ = std::fs::remove_dir_all(&masks_dir);
+        return Err(error);
     }
     let mut fine_dataset = dataset.clone();
     fine_dataset.masks_dir = Some(masks_dir.clone());

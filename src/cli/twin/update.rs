@@ -84,7 +84,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     outcome
         .report
         .record_scores(&mut history, started.elapsed().as_secs_f64());
-    twin.save_history(&args.survey, &history)?;
+    // The update is recorded already: a history that cannot be written only costs the chart.
+    if let Err(e) = twin.save_history(&args.survey, &history) {
+        eprintln!("warning: the update's training history was not kept: {e}");
+    }
     let path = twin
         .model_path(&args.survey)?
         .unwrap_or_else(|| twin.survey_dir(&args.survey));
