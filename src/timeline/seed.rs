@@ -156,11 +156,14 @@ fn plant(
             if !config.classes[class] {
                 continue;
             }
-            for (p, _) in mask.data.iter().enumerate().filter(|(_, v)| **v != 0) {
-                *report
-                    .candidates
-                    .entry(DamageClass::ALL[class].id().to_string())
-                    .or_default() += 1;
+            let pixels: Vec<usize> = (0..mask.data.len())
+                .filter(|&p| mask.data[p] != 0)
+                .collect();
+            *report
+                .candidates
+                .entry(DamageClass::ALL[class].id().to_string())
+                .or_default() += pixels.len();
+            for p in pixels {
                 let z = depth[p];
                 if !z.is_finite() {
                     continue;

@@ -253,14 +253,16 @@ pub fn update(
         refine_config.appearance = fits;
         appearance = Some(pooled);
     }
-    let mut seeded = model.clone();
+    // The twin with its new-damage seeds, when seeding is on; the twin itself otherwise.
+    let mut seeded = None;
     let seeds = match &config.seeds {
         Some(seed_config) => {
             let (train_idx, _) =
                 split_views(&dataset, &refine_config.holdout).map_err(JobError::Invalid)?;
             let settings = RenderSettings::new(refine_config.background, model.sh_degree);
+            let with_seeds = seeded.insert(model.clone());
             let report = seed_new_damage(
-                &mut seeded,
+                with_seeds,
                 &dataset,
                 &train_idx,
                 refine_config.scale,
@@ -274,7 +276,8 @@ pub fn update(
         }
         None => None,
     };
-    let outcome = refine_from(ctx, &dataset, &model, &seeded, &refine_config)?;
+    let seeded = seeded.as_ref().unwrap_or(&model);
+    let outcome = refine_from(ctx, &dataset, &model, seeded, &refine_config)?;
     let mut splats = (*outcome.splats).clone();
     // History: what the update trained or created changed in this survey (the seeds count as
     // created); damage nobody saw before is this survey's.
