@@ -198,7 +198,8 @@ fn overlay_mode_paints_the_targets_and_reads_the_colours_back() {
 #[test]
 fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks() {
     let study = StudyConfig {
-        rates: vec![0.0, 0.5],
+        // Out of order: the study runs rate 0 first, whose twin the other rates compare with.
+        rates: vec![0.5, 0.0],
         modes: vec![TrainMode::Label],
         run: RunConfig {
             ..config(TrainMode::Label, 300)
@@ -207,6 +208,7 @@ fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks
         noise_seed: 5,
         threads: None,
         fine_iterations: 0,
+        fine_label_geometry_until: None,
         fine_work_dir: std::env::temp_dir(),
     };
     let mut finished = 0;
@@ -232,6 +234,12 @@ fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks
             "half of the 21 training views, rounded half away from zero"
         );
         assert!(noisy.input_iou < 0.95, "{noisy:?}");
+        // What the clean-mask twin makes of the pixels the corruption got wrong.
+        assert!(clean.clean_twin_corrected.is_nan(), "{clean:?}");
+        assert!(
+            (0.0..=1.0).contains(&noisy.clean_twin_corrected),
+            "{noisy:?}"
+        );
         for r in [clean, noisy] {
             for v in [r.twin_iou_train, r.twin_iou_heldout] {
                 assert!((0.0..=1.0).contains(&v), "{r:?}");

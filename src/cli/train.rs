@@ -63,6 +63,10 @@ pub struct Args {
     /// Weight of the label loss beside the photometric loss (label mode).
     #[arg(long, default_value_t = RunConfig::default().label_weight)]
     pub label_weight: f32,
+    /// The fraction of the run during which the label loss shapes the geometry; after it only
+    /// the label logits follow the masks (label mode; default: the whole run).
+    #[arg(long, value_name = "FRACTION")]
+    pub label_geometry_until: Option<f32>,
     /// Overlay mode's class colours. Without this flag they are chosen to contrast with the
     /// photos (and saved in model.ply); `quakecity` keeps DESIGN.md's colours, and class=r,g,b
     /// (repeatable, e.g. crack=0,0,255) overrides one of those.
@@ -131,6 +135,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seed: args.run.seed,
         background: args.run.background,
         label_weight: args.label_weight,
+        label_geometry_until: args.label_geometry_until,
         label_pos_weight: args.label_pos_weight,
         label_lr: Some(args.label_lr),
         random_points: args.run.init_points,

@@ -79,6 +79,9 @@ pub struct RefineConfig {
     /// Weight of the label loss and of damage pixels in it (label mode).
     pub label_weight: f32,
     pub label_pos_weight: f32,
+    /// The fraction of the refinement during which the label loss shapes the geometry
+    /// (`Targets::label_geometry_steps`; None: all of it).
+    pub label_geometry_until: Option<f32>,
     pub label_lr: Option<f32>,
     /// Per view index, how its photo's light differs from the twin's: the photos are mapped
     /// into the twin's look before training and scoring (a later survey's light must not
@@ -118,6 +121,7 @@ impl Default for RefineConfig {
             // recall 0.95, IoU 0.69); 2 balances them (0.80 / 0.89, IoU 0.73) and 1 loses rebar
             // recall (0.53).
             label_pos_weight: 2.0,
+            label_geometry_until: run.label_geometry_until,
             label_lr: run.label_lr,
             appearance: BTreeMap::new(),
             given: None,
@@ -498,6 +502,8 @@ fn refine_spec(config: &RefineConfig, model: &Splats, labels: bool) -> TrainSpec
         0.0
     };
     spec.targets.label_pos_weight = config.label_pos_weight;
+    spec.targets.label_geometry_steps =
+        crate::damage::setup::geometry_steps(config.label_geometry_until, iterations);
     spec.lr = config.lr;
     spec.lr.raw_labels = config.label_lr.or(config.lr.raw_labels);
     spec.max_scale_growth = config.max_scale_growth;

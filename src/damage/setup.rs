@@ -67,6 +67,9 @@ pub struct RunConfig {
     pub label_weight: f32,
     /// Weight of damage pixels in the label cross-entropy (see `Targets::label_pos_weight`).
     pub label_pos_weight: f32,
+    /// The fraction of the run during which the label loss shapes the geometry
+    /// (`Targets::label_geometry_steps`; None: all of it).
+    pub label_geometry_until: Option<f32>,
     /// Adam learning rate of the label logits (None: the optimiser's default).
     pub label_lr: Option<f32>,
     /// Random initial points when the dataset has none.
@@ -106,6 +109,7 @@ impl Default for RunConfig {
             // Measured on the demo building (docs/DAMAGE.md): against 1.0 and the optimiser's
             // 0.01, these doubled the held-out crack IoU (0.19 → 0.41) in about half the steps.
             label_pos_weight: 4.0,
+            label_geometry_until: None,
             label_lr: Some(0.05),
             random_points: 100_000,
             eval_every: 0,
@@ -275,6 +279,8 @@ pub fn model_and_spec(
         0.0
     };
     spec.targets.label_pos_weight = config.label_pos_weight;
+    spec.targets.label_geometry_steps =
+        geometry_steps(config.label_geometry_until, spec.iterations);
     spec.lr.raw_labels = config.label_lr;
     if let Some(max) = config.max_gaussians {
         spec.densify = DensifyPolicy::Budget { max };
@@ -283,6 +289,11 @@ pub fn model_and_spec(
         spec.densify = DensifyPolicy::Adaptive(densify_for_budget(spec.iterations, budget, 0));
     }
     Ok((splats, spec))
+}
+
+/// `Targets::label_geometry_steps` for the fraction `until` of a run of `iterations` steps.
+pub fn geometry_steps(until: Option<f32>, iterations: u32) -> Option<u32> {
+    until.map(|f| (f.clamp(0.0, 1.0) * iterations as f32).round() as u32)
 }
 
 /// The colours an overlay-mode run paints its damage in (None in other modes): chosen against

@@ -89,6 +89,11 @@ pub struct StudyConfig {
     pub threads: Option<usize>,
     /// Steps of the full-resolution fine-tune of each label-mode twin (0: none).
     pub fine_iterations: u32,
+    /// The fraction of the fine-tune during which the label loss shapes the geometry (None: all
+    /// of it; `Targets::label_geometry_steps`). Apart from the coarse run's
+    /// (`run.label_geometry_until`): at full resolution the fine-tune's work is to reshape the
+    /// damage's geometry to the masks.
+    pub fine_label_geometry_until: Option<f32>,
     /// Where the fine-tune's corrupted full-resolution masks are written while it runs.
     pub fine_work_dir: std::path::PathBuf,
 }
@@ -127,6 +132,18 @@ pub struct StudyRow {
     /// Of those, the fraction the twin renders as the clean mask has them (errors corrected).
     #[serde(deserialize_with = "nan_if_null", alias = "corrupted_pixels_corrected")]
     pub errors_corrected: f64,
+    /// Errors corrected split by kind: of the damage pixels the corruption cut out, the fraction
+    /// the twin renders as damage...
+    #[serde(deserialize_with = "nan_if_null", default = "nan")]
+    pub missed_corrected: f64,
+    /// ...and of the pixels it added, the fraction the twin renders as no damage.
+    #[serde(deserialize_with = "nan_if_null", default = "nan")]
+    pub added_corrected: f64,
+    /// Of the same corrupted pixels, the fraction the twin trained on the clean masks (rate 0, same
+    /// mode and stage) renders as the clean mask has them: the most a twin at this resolution
+    /// can be expected to correct (NaN when the study has no rate 0).
+    #[serde(deserialize_with = "nan_if_null", default = "nan")]
+    pub clean_twin_corrected: f64,
     /// Of the training-view pixels where the corrupted mask is right, the fraction the twin
     /// renders wrong (errors introduced; at rate 0, the clean-mask twin's own error).
     #[serde(deserialize_with = "nan_if_null", default = "nan")]
@@ -207,7 +224,11 @@ pub fn run_study(
     let runs = config.rates.len() * config.modes.len();
     let mut rows = Vec::new();
     let mut run = 0;
-    for &rate in &config.rates {
+    // Rate 0 first: its twins' masks are what the other rates' clean-twin figures read.
+    let mut rates = config.rates.clone();
+    rates.sort_by(f32::total_cmp);
+    let mut clean_twins: Vec<(TrainMode, StudyStage, Vec<Vec<Mask>>)> = Vec::new();
+    for rate in rates {
         let (noisy, corrupted) = corrupt(&clean, config.noise, rate, config.noise_seed);
         let input = agreement(&corrupted, &clean.reference, None);
         let input_noisy = agreement(&corrupted, &clean.reference, Some(&noisy));
@@ -267,6 +288,7 @@ pub fn run_study(
                 &noisy,
                 &readout,
                 config.run.background,
+                clean_twin(&clean_twins, mode, StudyStage::Coarse),
             );
             let heldout_scores =
                 evaluate_damage(&outcome.splats, &heldout, &readout, config.run.background);
@@ -291,6 +313,9 @@ pub fn run_study(
                 rows: run_rows.clone(),
             });
             rows.extend(run_rows);
+            if rate == 0.0 {
+                clean_twins.push((mode, StudyStage::Coarse, training.predicted));
+            }
             if mode == TrainMode::Label && config.fine_iterations > 0 {
                 on_event(StudyEvent::FineStarted { rate });
                 // A twin that shows no damage to refine is a finding of its own, not the end of
@@ -302,8 +327,12 @@ pub fn run_study(
                     rate,
                     &outcome.splats,
                     (&train_indices, &heldout_indices),
+                    clean_twin(&clean_twins, mode, StudyStage::Finetune),
                 ) {
-                    Ok(fine) => {
+                    Ok((fine, predicted)) => {
+                        if rate == 0.0 {
+                            clean_twins.push((mode, StudyStage::Finetune, predicted));
+                        }
                         on_event(StudyEvent::RunFinished {
                             run,
                             rows: fine.clone(),
@@ -317,6 +346,18 @@ pub fn run_study(
         }
     }
     Ok(rows)
+}
+
+/// The masks of the twin trained on clean masks in `mode` at `stage`, once the study has it.
+fn clean_twin(
+    twins: &[(TrainMode, StudyStage, Vec<Vec<Mask>>)],
+    mode: TrainMode,
+    stage: StudyStage,
+) -> Option<&[Vec<Mask>]> {
+    twins
+        .iter()
+        .find(|(m, s, _)| *m == mode && *s == stage)
+        .map(|(_, _, masks)| masks.as_slice())
 }
 
 pub(crate) fn load_clean_training(
@@ -435,6 +476,15 @@ pub(crate) struct TrainingScores {
     /// Per class: (pixels the input has right that the twin renders wrong, pixels the input
     /// has right).
     introduced: [(u64, u64); 3],
+    /// Per class: (cut-out damage pixels the twin renders as damage, cut-out damage pixels).
+    missed: [(u64, u64); 3],
+    /// Per class: (added pixels the twin renders as no damage, added pixels).
+    added: [(u64, u64); 3],
+    /// Per class: (corrupted pixels the clean-mask twin renders as the clean mask has them,
+    /// corrupted pixels), when its masks were given.
+    clean_twin: [(u64, u64); 3],
+    /// The twin's masks per training view (`DamageClass::ALL` order): at rate 0, the clean twin's.
+    pub(crate) predicted: Vec<Vec<Mask>>,
 }
 
 pub(crate) fn score_training_views(
@@ -444,6 +494,7 @@ pub(crate) fn score_training_views(
     noisy: &[bool],
     readout: &DamageReadout,
     background: glam::Vec3,
+    clean_twin: Option<&[Vec<Mask>]>,
 ) -> TrainingScores {
     let settings = RenderSettings::new(background, splats.sh_degree);
     let (splats, readout) = readout.prepare(splats);
@@ -455,6 +506,10 @@ pub(crate) fn score_training_views(
         noisy: DamageScores::default(),
         corrected: [(0, 0); 3],
         introduced: [(0, 0); 3],
+        missed: [(0, 0); 3],
+        added: [(0, 0); 3],
+        clean_twin: [(0, 0); 3],
+        predicted: Vec::with_capacity(clean.reference.len()),
     };
     for (i, view) in clean.reference.iter().enumerate() {
         rasterizer.forward(&splats, &view.camera, &settings, &mut out);
@@ -466,8 +521,26 @@ pub(crate) fn score_training_views(
         for (k, reference) in view.reference.iter().enumerate() {
             let Some(reference) = reference else { continue };
             let input = &corrupted[i][k].data;
+            if let Some(clean_twin) = clean_twin.and_then(|c| c.get(i)).and_then(|m| m.get(k)) {
+                let counts = &mut scores.clean_twin[k];
+                for ((&r, &c), &p) in reference.data.iter().zip(input).zip(&clean_twin.data) {
+                    if (r != 0) != (c != 0) {
+                        counts.1 += 1;
+                        counts.0 += u64::from((p != 0) == (r != 0));
+                    }
+                }
+            }
             for ((&r, &c), &p) in reference.data.iter().zip(input).zip(&predicted[k].data) {
                 let twin_right = (p != 0) == (r != 0);
+                if (r != 0) != (c != 0) {
+                    let kind = if r != 0 {
+                        &mut scores.missed[k]
+                    } else {
+                        &mut scores.added[k]
+                    };
+                    kind.1 += 1;
+                    kind.0 += u64::from(twin_right);
+                }
                 let counts = if (r != 0) != (c != 0) {
                     &mut scores.corrected[k]
                 } else {
@@ -480,6 +553,7 @@ pub(crate) fn score_training_views(
                 }
             }
         }
+        scores.predicted.push(predicted);
     }
     scores
 }
@@ -535,6 +609,9 @@ pub(crate) fn rows_for(
         .map(|&class| {
             let (fixed, wrong) = train.corrected[class.channel()];
             let (broken, right) = train.introduced[class.channel()];
+            let (clean_fixed, clean_wrong) = train.clean_twin[class.channel()];
+            let (missed_fixed, missed) = train.missed[class.channel()];
+            let (added_fixed, added) = train.added[class.channel()];
             let share = |part: u64, whole: u64| {
                 if whole > 0 {
                     part as f64 / whole as f64
@@ -557,6 +634,9 @@ pub(crate) fn rows_for(
                 twin_iou_noisy_views: figure(&train.noisy, class, MaskAgreement::iou),
                 corrupted_pixels: wrong,
                 errors_corrected: share(fixed, wrong),
+                missed_corrected: share(missed_fixed, missed),
+                added_corrected: share(added_fixed, added),
+                clean_twin_corrected: share(clean_fixed, clean_wrong),
                 errors_introduced: share(broken, right),
                 noisy_views: input.noisy_views,
                 train_seconds,

@@ -30,6 +30,8 @@ const FINE_SCALE: ImageScale = ImageScale::Factor(1);
 /// The label-mode coarse twin `coarse`, trained on masks corrupted at `rate`, refined at full
 /// resolution for `config.fine_iterations` steps and scored. The corrupted full-resolution
 /// masks are written under `config.fine_work_dir` for the refinement to read, and removed after.
+/// `clean_twin`: the fine-tuned clean-mask twin's masks on the training views, for the rows'
+/// `clean_twin_corrected`. Returns the rows and this twin's masks on the training views.
 pub(crate) fn fine_rows(
     dataset: &Dataset,
     source: &ReferenceSource,
@@ -37,7 +39,8 @@ pub(crate) fn fine_rows(
     rate: f32,
     coarse: &Splats,
     (train_indices, heldout_indices): (&[usize], &[usize]),
-) -> Result<Vec<StudyRow>, String> {
+    clean_twin: Option<&[Vec<Mask>]>,
+) -> Result<(Vec<StudyRow>, Vec<Vec<Mask>>), String> {
     let started = Instant::now();
     let mut fine_config = config.clone();
     fine_config.run.scale = FINE_SCALE;
@@ -83,6 +86,7 @@ pub(crate) fn fine_rows(
         background: config.run.background,
         seed: config.run.seed,
         label_weight: config.run.label_weight,
+        label_geometry_until: config.fine_label_geometry_until,
         ..RefineConfig::default()
     };
     let dataset_arc = Arc::new(fine_dataset);
@@ -107,6 +111,7 @@ pub(crate) fn fine_rows(
         &noisy,
         &readout,
         config.run.background,
+        clean_twin,
     );
     let heldout_scores = evaluate_damage(refined, &heldout, &readout, config.run.background);
     let input = agreement(&corrupted, &clean.reference, None);
@@ -132,7 +137,7 @@ pub(crate) fn fine_rows(
     for row in &mut rows {
         row.stage = StudyStage::Finetune;
     }
-    Ok(rows)
+    Ok((rows, training.predicted))
 }
 
 /// A view's masks (`DamageClass::ALL` order; None: no mask of that class) as

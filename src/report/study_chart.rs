@@ -282,8 +282,8 @@ pub fn write_study_chart(
 /// The rows as a Markdown table (for docs/).
 pub fn study_table(rows: &[StudyRow]) -> String {
     let mut text = String::from(
-        "| mode | stage | rate | class | input IoU | twin IoU (train views) | twin IoU (held-out) | twin F1 (held-out) | input IoU (corrupted views) | twin IoU (corrupted views) | errors corrected | errors introduced |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| mode | stage | rate | class | input IoU | twin IoU (train views) | twin IoU (held-out) | twin F1 (held-out) | input IoU (corrupted views) | twin IoU (corrupted views) | errors corrected | clean twin on those pixels | errors introduced |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     // No corrupted views at rate 0: those columns have nothing to show.
     let value = |v: f64| {
@@ -303,6 +303,11 @@ pub fn study_table(rows: &[StudyRow]) -> String {
         } else {
             "–".to_string()
         };
+        let clean_twin = if r.corrupted_pixels > 0 && r.clean_twin_corrected.is_finite() {
+            format!("{:.1} %", 100.0 * r.clean_twin_corrected)
+        } else {
+            "–".to_string()
+        };
         let introduced = if r.errors_introduced.is_finite() {
             format!("{:.2} %", 100.0 * r.errors_introduced)
         } else {
@@ -310,7 +315,7 @@ pub fn study_table(rows: &[StudyRow]) -> String {
         };
         let _ = writeln!(
             text,
-            "| {} | {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.mode,
             r.stage,
             r.rate,
@@ -322,6 +327,7 @@ pub fn study_table(rows: &[StudyRow]) -> String {
             value(r.input_iou_noisy_views),
             value(r.twin_iou_noisy_views),
             corrected,
+            clean_twin,
             introduced
         );
     }
@@ -333,12 +339,12 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
     let mut text = String::from(
         "mode,stage,rate,class,input_iou,twin_iou_train,twin_iou_heldout,twin_f1_heldout,\
          twin_precision_heldout,twin_recall_heldout,input_iou_noisy_views,twin_iou_noisy_views,\
-         corrupted_pixels,errors_corrected,errors_introduced,noisy_views,train_seconds,gaussians,heldout_psnr\n",
+         corrupted_pixels,errors_corrected,missed_corrected,added_corrected,clean_twin_corrected,errors_introduced,noisy_views,train_seconds,gaussians,heldout_psnr\n",
     );
     for r in rows {
         let _ = writeln!(
             text,
-            "{},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.5},{:.5},{},{:.2},{},{}",
+            "{},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.2},{},{}",
             r.mode,
             r.stage,
             r.rate,
@@ -353,6 +359,9 @@ pub fn study_csv(rows: &[StudyRow]) -> String {
             r.twin_iou_noisy_views,
             r.corrupted_pixels,
             r.errors_corrected,
+            r.missed_corrected,
+            r.added_corrected,
+            r.clean_twin_corrected,
             r.errors_introduced,
             r.noisy_views,
             r.train_seconds,

@@ -464,6 +464,15 @@ impl Adam {
         Ok(())
     }
 
+    /// Scales a group's moments as if every gradient it has seen had been `factor` times as
+    /// large: `m · factor`, `v · factor²`. Adam's step does not depend on the gradients' scale
+    /// (up to `eps`), so the next steps are those the unscaled gradients would have given.
+    pub fn scale_moments(&mut self, g: ParamGroup, factor: f32) {
+        let mom = &mut self.groups[g.index()];
+        mom.m.iter_mut().for_each(|m| *m *= factor);
+        mom.v.iter_mut().for_each(|v| *v *= factor * factor);
+    }
+
     /// Zeroes the moments of one Gaussian in one group.
     pub fn reset_gaussian(&mut self, g: ParamGroup, gaussian: usize) {
         let mom = &mut self.groups[g.index()];

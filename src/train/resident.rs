@@ -23,8 +23,8 @@ use crate::train::ssim::gaussian_window;
 /// Where a GPU-resident run stands.
 pub(super) struct Resident {
     /// The CPU model or moments changed since the last upload (start, density control,
-    /// rollback).
-    dirty: bool,
+    /// rollback, the label loss's detachment).
+    pub(super) dirty: bool,
     /// The GPU model moved since the last download.
     stale: bool,
     /// The first GPU error (the run must end).
@@ -327,6 +327,7 @@ impl Trainer {
         let view = &self.views[view_index];
         let channels = self.splats.label_channels;
         let targets = self.spec.targets;
+        let label_weight = self.label_weight_at(step);
         let labels_on = targets.label_weight > 0.0
             && channels > 0
             && view.labels.len() == channels
@@ -345,7 +346,7 @@ impl Trainer {
         let weights = LossWeights {
             ssim_lambda: targets.ssim_lambda,
             rgb_weight: targets.rgb_weight.max(0.0),
-            label_weight: targets.label_weight,
+            label_weight,
             pos_weight: self.label_params.pos_weight,
             eps: self.label_params.eps,
             window: gaussian_window(),

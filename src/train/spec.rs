@@ -145,6 +145,12 @@ pub enum DensifyPolicy {
     Budget { max: usize },
 }
 
+/// The label loss's weight, relative to its set weight, once it no longer shapes the geometry
+/// (`Targets::label_geometry_steps`): a power of two, so the scaling is exact, and small enough
+/// that what reaches the geometry is noise beside the photometric gradient. Adam's moments of
+/// the label logits are scaled with it, so their steps stay what the full loss gives.
+pub const DETACHED_LABEL_SCALE: f32 = 1.0 / 4096.0;
+
 /// What the loss compares the render to. RGB uses each view's `image` (an overlay target is just
 /// another RGB image, built by the damage module); labels use each view's per-class masks.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -159,6 +165,13 @@ pub struct Targets {
     /// straddling a one-pixel crack sees mostly background, so > 1 keeps recall up.
     #[serde(default = "default_pos_weight")]
     pub label_pos_weight: f32,
+    /// Steps during which the label loss shapes the geometry (None: the whole run). After them
+    /// its gradient reaches positions, shapes and opacities only scaled by
+    /// [`DETACHED_LABEL_SCALE`], while the label logits keep the steps the
+    /// full loss gives them: the views' consensus forms the damage's geometry first, and what
+    /// a long run would add is each view's own mask errors (docs/DAMAGE.md, mask-noise study).
+    #[serde(default)]
+    pub label_geometry_steps: Option<u32>,
 }
 
 fn default_pos_weight() -> f32 {
@@ -172,6 +185,7 @@ impl Default for Targets {
             ssim_lambda: 0.2,
             label_weight: 0.0,
             label_pos_weight: default_pos_weight(),
+            label_geometry_steps: None,
         }
     }
 }

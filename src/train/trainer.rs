@@ -428,6 +428,7 @@ impl Trainer {
 
     /// One optimisation step on the next view.
     pub fn step(&mut self) -> StepReport {
+        self.detach_labels_if_due(self.steps_done + 1);
         if self.resident.is_some() {
             return self.step_resident();
         }

@@ -50,6 +50,16 @@ pub struct MaskNoiseArgs {
     /// Weight of the label loss (label mode).
     #[arg(long, default_value_t = RunConfig::default().label_weight)]
     pub label_weight: f32,
+    /// The fraction of the run during which the label loss shapes the geometry; after it only
+    /// the label logits follow the masks (label mode; default: the whole run).
+    #[arg(long, value_name = "FRACTION")]
+    pub label_geometry_until: Option<f32>,
+    /// Weight of damage pixels in the label cross-entropy (label mode).
+    #[arg(long, default_value_t = RunConfig::default().label_pos_weight)]
+    pub label_pos_weight: f32,
+    /// The same for the full-resolution fine-tune (default: the whole fine-tune).
+    #[arg(long, value_name = "FRACTION")]
+    pub fine_label_geometry_until: Option<f32>,
     /// Class colour override for overlay mode, class=r,g,b (repeatable).
     #[arg(long = "colour")]
     pub colours: Vec<String>,
@@ -89,6 +99,10 @@ struct StudyFile<'a> {
     modes: &'a [TrainMode],
     iterations: u32,
     fine_iterations: u32,
+    label_weight: f32,
+    label_geometry_until: Option<f32>,
+    fine_label_geometry_until: Option<f32>,
+    label_pos_weight: f32,
     scale: ImageScale,
     seed: u64,
     seconds: f64,
@@ -127,12 +141,15 @@ pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
             holdout: args.holdout.holdout(),
             seed: args.seed,
             label_weight: args.label_weight,
+            label_geometry_until: args.label_geometry_until,
+            label_pos_weight: args.label_pos_weight,
             ..RunConfig::default()
         },
         noise: args.noise,
         noise_seed: args.seed,
         threads: args.threads,
         fine_iterations: args.fine_iters,
+        fine_label_geometry_until: args.fine_label_geometry_until,
         fine_work_dir: args.out.clone(),
     };
     let runs = args.rates.len() * args.modes.len();
@@ -158,7 +175,7 @@ pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
         StudyEvent::RunFinished { rows, .. } => {
             for r in rows {
                 let line = format!(
-                    "{} {} rate {:.2} {:<9} input IoU {:.3} → twin IoU {:.3} (train views), {:.3} (held-out); errors corrected {:.1} %, introduced {:.2} %",
+                    "{} {} rate {:.2} {:<9} input IoU {:.3} → twin IoU {:.3} (train views), {:.3} (held-out); errors corrected {:.1} % (cut-out {:.1} %, added {:.1} %; clean twin {:.1} %), introduced {:.2} %",
                     r.mode,
                     r.stage,
                     r.rate,
@@ -167,6 +184,9 @@ pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
                     r.twin_iou_train,
                     r.twin_iou_heldout,
                     100.0 * r.errors_corrected,
+                    100.0 * r.missed_corrected,
+                    100.0 * r.added_corrected,
+                    100.0 * r.clean_twin_corrected,
                     100.0 * r.errors_introduced
                 );
                 print_line(&bar, line);
@@ -184,6 +204,10 @@ pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
         modes: &args.modes,
         iterations: args.iters,
         fine_iterations: args.fine_iters,
+        label_weight: args.label_weight,
+        label_geometry_until: args.label_geometry_until,
+        fine_label_geometry_until: args.fine_label_geometry_until,
+        label_pos_weight: args.label_pos_weight,
         scale: args.scale,
         seed: args.seed,
         seconds,
