@@ -28,3 +28,4 @@ pub use mode::TrainMode;
 pub use palette::Palette;
 pub mod study;
 pub mod study_fine;
+pub(crate) mod study_scores;

@@ -16,9 +16,9 @@ use crate::damage::evaluate::{DamageReadout, evaluate_damage};
 use crate::damage::reference::{ReferenceSource, load_reference_views};
 use crate::damage::refine::{RefineConfig, Strategy, refine};
 use crate::damage::select::SelectConfig;
-use crate::damage::study::{
-    Inputs, StudyConfig, StudyRow, StudyStage, agreement, corrupt, heldout_psnr,
-    load_clean_training, rows_for, score_training_views,
+use crate::damage::study::{StudyConfig, StudyRow, StudyStage, corrupt, load_clean_training};
+use crate::damage::study_scores::{
+    Inputs, agreement, heldout_psnr, rows_for, score_training_views,
 };
 use crate::scene::{Dataset, ImageScale, Mask};
 use crate::splats::Splats;
