@@ -43,6 +43,10 @@ pub struct BudgetArgs {
     pub compact: Vec<f64>,
     #[arg(long, default_value_t = 500)]
     pub compact_iters: u32,
+    /// Train nothing: redraw the chart from an existing `--out DIR/budget-study.json` (rows of
+    /// several studies merged there, say).
+    #[arg(long)]
+    pub replot: bool,
 }
 
 /// How one scene was measured.
@@ -82,6 +86,15 @@ fn save(out: &Path, name: &str, splats: &Splats) -> anyhow::Result<u64> {
 }
 
 pub fn run(args: BudgetArgs) -> anyhow::Result<()> {
+    if args.replot {
+        let json_path = args.out.join("budget-study.json");
+        let text = std::fs::read_to_string(&json_path)
+            .with_context(|| format!("reading {}", json_path.display()))?;
+        let file: StudyFile = serde_json::from_str(&text)
+            .with_context(|| format!("reading {}", json_path.display()))?;
+        write_budget_chart(&args.out, "budget-study", &file.rows)?;
+        return Ok(());
+    }
     let dataset: Arc<Dataset> = Arc::new(open_dataset(&args.dataset, args.run.background)?);
     let holdout = args.run.holdout.holdout();
     let (train_idx, test_idx) = split_views(&dataset, &holdout).map_err(anyhow::Error::msg)?;
