@@ -11,7 +11,6 @@ use serde::Serialize;
 use crate::raster::{
     PixelGrads, RasterBackend, Rasterizer, RenderOutput, RenderSettings, SplatGrads,
 };
-use crate::scene::Mask;
 use crate::splats::Splats;
 use crate::train::adam::{Adam, GroupFlags, LearningRates, ParamGrads, ParamGroup};
 use crate::train::appearance::AppearanceModel;
@@ -116,22 +115,20 @@ pub struct StepReport {
     pub rolled_back: Option<String>,
 }
 
-/// State restored by a rollback.
-#[derive(Clone)]
-struct Checkpoint {
-    splats: Splats,
-    adam: Adam,
-    densifier: Option<Densifier>,
-}
-
 /// Steps between pinning the photos' mean light to the identity (`AppearanceModel::recentre`):
 /// the drift it removes is slow, and each pin rescales every SH coefficient.
 const APPEARANCE_RECENTRE_EVERY: u32 = 100;
 
+#[path = "checkpoint.rs"]
+mod checkpoint;
 #[path = "resident.rs"]
 mod resident;
 #[path = "step_loss.rs"]
 mod step_loss;
+#[path = "trainer_inputs.rs"]
+mod trainer_inputs;
+use checkpoint::Checkpoint;
+use trainer_inputs::{check_view, region_tiles};
 
 /// One training run in progress.
 pub struct Trainer {
@@ -547,19 +544,6 @@ impl Trainer {
         }
     }
 
-    /// A full scan of the model, then a checkpoint of it: NaN in Gaussians no step looked at
-    /// (culled, or made by density control) never survives into a checkpoint. Returns what was
-    /// not finite instead of checkpointing it.
-    fn scan_and_checkpoint(&mut self) -> Option<&'static str> {
-        let t = Instant::now();
-        let bad = first_non_finite_param(&self.splats);
-        if bad.is_none() {
-            self.take_checkpoint();
-        }
-        self.timings.checks += t.elapsed().as_secs_f64();
-        bad
-    }
-
     /// The budget to prune to at `step`: the end of the densification window (or of the run,
     /// when that comes first) of a spec with `DensifyConfig::prune_to`, if the model exceeds it.
     fn importance_prune_due(&self, step: u32) -> Option<usize> {
@@ -577,40 +561,6 @@ impl Trainer {
         self.adam.retain(&mask);
         if let Some(densifier) = &mut self.densifier {
             densifier.reset_stats(self.splats.len());
-        }
-    }
-
-    fn take_checkpoint(&mut self) {
-        self.checkpoint.splats.clone_from(&self.splats);
-        self.checkpoint.adam.clone_from(&self.adam);
-        self.checkpoint.densifier.clone_from(&self.densifier);
-        self.checkpoint_step = self.steps_done;
-    }
-
-    /// Undoes a bad step: when the model itself is damaged, restores the last checkpoint; the
-    /// step still counts, so a run always ends.
-    fn roll_back(&mut self, step: u32, started: Instant, reason: String) -> StepReport {
-        let t = Instant::now();
-        let mut reason = reason;
-        if first_non_finite_param(&self.splats).is_some() || self.adam.len() != self.splats.len() {
-            self.splats.clone_from(&self.checkpoint.splats);
-            self.adam.clone_from(&self.checkpoint.adam);
-            self.densifier.clone_from(&self.checkpoint.densifier);
-            self.grads = SplatGrads::zeros(&self.splats);
-            reason.push_str(&format!(
-                "; model restored to step {}",
-                self.checkpoint_step
-            ));
-        } else {
-            reason.push_str("; step skipped");
-        }
-        self.steps_done = step;
-        self.timings.checks += t.elapsed().as_secs_f64();
-        self.timings.total += started.elapsed().as_secs_f64();
-        StepReport {
-            step,
-            loss: f32::NAN,
-            rolled_back: Some(reason),
         }
     }
 
@@ -635,87 +585,4 @@ impl Trainer {
         let k3 = self.splats.sh_coeffs() * 3;
         self.splats.sh[gaussian * k3] = f32::NAN;
     }
-}
-
-/// The tiles a loss region needs rendered: every tile within the SSIM window's half width
-/// (5 px for its 11×11 window) of a region pixel. The loss's value and gradient at region pixels
-/// read no pixel beyond that, and its gradient reaches none, so leaving the other tiles out
-/// changes nothing that is trained.
-fn region_tiles(region: &Mask) -> Vec<bool> {
-    const REACH: u32 = 5;
-    let ts = crate::raster::TILE_SIZE;
-    let (tiles_x, tiles_y) = crate::raster::tile_grid(region.width, region.height);
-    let mut tiles = vec![false; tiles_x as usize * tiles_y as usize];
-    for y in 0..region.height {
-        let row = &region.data[(y * region.width) as usize..((y + 1) * region.width) as usize];
-        let (ty0, ty1) = (
-            y.saturating_sub(REACH) / ts,
-            (y + REACH).min(region.height - 1) / ts,
-        );
-        // Each run of region pixels in the row, widened by the reach.
-        let mut x = 0;
-        while x < region.width {
-            if row[x as usize] == 0 {
-                x += 1;
-                continue;
-            }
-            let start = x;
-            while x < region.width && row[x as usize] != 0 {
-                x += 1;
-            }
-            let (tx0, tx1) = (
-                start.saturating_sub(REACH) / ts,
-                (x - 1 + REACH).min(region.width - 1) / ts,
-            );
-            for ty in ty0..=ty1 {
-                for tx in tx0..=tx1 {
-                    tiles[(ty * tiles_x + tx) as usize] = true;
-                }
-            }
-        }
-    }
-    tiles
-}
-
-fn check_view(view: &TrainView, label_channels: usize) -> Result<(), TrainError> {
-    let k = &view.camera.intrinsics;
-    let pixels = k.width as usize * k.height as usize;
-    if view.image.data.len() != pixels * 3
-        || view.image.width != k.width
-        || view.image.height != k.height
-    {
-        return Err(TrainError::ImageSize {
-            name: view.name.clone(),
-            got: view.image.data.len(),
-            expected: pixels * 3,
-        });
-    }
-    let masks = view
-        .labels
-        .iter()
-        .enumerate()
-        .map(|(k, m)| (format!("label {k}"), m))
-        .chain(view.region.iter().map(|m| ("region".to_string(), m)));
-    for (what, mask) in masks {
-        if mask.data.len() != pixels {
-            return Err(TrainError::MaskSize {
-                name: view.name.clone(),
-                what,
-                got: mask.data.len(),
-                expected: pixels,
-            });
-        }
-    }
-    if !view.labels.is_empty() && view.labels.len() != label_channels {
-        return Err(TrainError::MaskSize {
-            name: view.name.clone(),
-            what: format!(
-                "{} label masks for {label_channels} channels",
-                view.labels.len()
-            ),
-            got: view.labels.len(),
-            expected: label_channels,
-        });
-    }
-    Ok(())
 }
