@@ -3,10 +3,9 @@
 
 mod blob_scene;
 
-use blob_scene::{SIZE, scene};
+use blob_scene::{SIZE, initial_with_labels, scene};
 use damage_twin::scene::Mask;
 use damage_twin::splats::Splats;
-use damage_twin::splats::init::{InitOptions, from_points, random_points};
 use damage_twin::train::spec::{DensifyPolicy, ParamGroups, TrainSpec, TrainView};
 use damage_twin::train::trainer::Trainer;
 
@@ -28,17 +27,7 @@ fn labelled_views() -> Vec<TrainView> {
 }
 
 fn initial() -> Splats {
-    let points = random_points(300, 0.6, 3);
-    from_points(
-        &points.0,
-        &points.1,
-        &InitOptions {
-            sh_degree: 1,
-            label_channels: 1,
-            ..InitOptions::default()
-        },
-    )
-    .unwrap()
+    initial_with_labels(1)
 }
 
 fn spec(rgb_weight: f32, label_weight: f32, label_geometry_steps: Option<u32>) -> TrainSpec {

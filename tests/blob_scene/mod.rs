@@ -78,12 +78,18 @@ pub fn scene() -> (Vec<TrainView>, Vec<TrainView>) {
 }
 
 pub fn initial() -> Splats {
+    initial_with_labels(0)
+}
+
+/// The random initial model with `label_channels` damage channels.
+pub fn initial_with_labels(label_channels: usize) -> Splats {
     let points = random_points(300, 0.6, 3);
     from_points(
         &points.0,
         &points.1,
         &InitOptions {
             sh_degree: 1,
+            label_channels,
             ..InitOptions::default()
         },
     )
