@@ -46,7 +46,8 @@ where
     });
     let (lo, hi) = if lo <= hi { (lo, hi) } else { (0.0, 1.0) };
     let pad = ((hi - lo) * 0.15).max(0.1);
-    let max_x = rows.iter().map(|r| r.gaussians).max().unwrap_or(1) as f64 * 1.15;
+    // Room right of the largest model for its point label ("compact 100%").
+    let max_x = rows.iter().map(|r| r.gaussians).max().unwrap_or(1) as f64 * 1.3;
     let mut chart = ChartBuilder::on(area)
         .caption(
             format!("{scene}: held-out PSNR against Gaussians"),
@@ -108,7 +109,8 @@ where
             scenes.push(&row.scene);
         }
     }
-    let panels = root.split_evenly((1, scenes.len().max(1)));
+    let (grid_rows, grid_columns) = grid(scenes.len());
+    let panels = root.split_evenly((grid_rows, grid_columns));
     for (scene, panel) in scenes.iter().zip(&panels) {
         let of_scene: Vec<&BudgetRow> = rows.iter().filter(|r| r.scene == *scene).collect();
         draw_scene(panel, &of_scene)?;
@@ -117,7 +119,18 @@ where
     Ok(())
 }
 
-/// Writes `<stem>.png` and `<stem>.svg` into `dir`, one 600 px wide panel per scene.
+/// Panels per chart row: at most three side by side, so a study of many scenes stays readable.
+const PANELS_PER_ROW: usize = 3;
+
+/// (rows, columns) of the panel grid for `scenes` scenes.
+fn grid(scenes: usize) -> (usize, usize) {
+    let scenes = scenes.max(1);
+    let columns = scenes.min(PANELS_PER_ROW);
+    (scenes.div_ceil(columns), columns)
+}
+
+/// Writes `<stem>.png` and `<stem>.svg` into `dir`, one 600×450 px panel per scene, three to a
+/// row.
 pub fn write_budget_chart(
     dir: &Path,
     stem: &str,
@@ -126,7 +139,8 @@ pub fn write_budget_chart(
     let mut scenes: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
     scenes.sort_unstable();
     scenes.dedup();
-    let size = (600 * scenes.len().max(1) as u32, 450);
+    let (grid_rows, grid_columns) = grid(scenes.len());
+    let size = (600 * grid_columns as u32, 450 * grid_rows as u32);
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
     draw(BitMapBackend::new(&png, size).into_drawing_area(), rows)
@@ -134,4 +148,19 @@ pub fn write_budget_chart(
     draw(SVGBackend::new(&svg, size).into_drawing_area(), rows)
         .map_err(|e| ChartError::new(&svg, e))?;
     Ok(vec![png, svg])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::grid;
+
+    #[test]
+    fn panels_wrap_after_three_to_a_row() {
+        assert_eq!(grid(0), (1, 1));
+        assert_eq!(grid(1), (1, 1));
+        assert_eq!(grid(3), (1, 3));
+        assert_eq!(grid(4), (2, 3));
+        assert_eq!(grid(6), (2, 3));
+        assert_eq!(grid(7), (3, 3));
+    }
 }
