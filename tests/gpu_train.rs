@@ -2,7 +2,8 @@
 //! CPU, on the GPU with the model resident there (loss, backward and Adam on the GPU, density
 //! control at syncs) and on the GPU per step (the model and gradients crossing every step, loss
 //! and Adam on the CPU), with density control, ends at the same held-out PSNR; frozen Gaussians
-//! stay byte for byte what they were on the GPU paths too.
+//! stay byte for byte what they were on the GPU paths too; the label loss's detachment from the
+//! geometry reaches the resident model's moments.
 
 mod blob_scene;
 mod gpu_support;
@@ -170,5 +171,50 @@ fn check_same_moves(start: &Splats, on_gpu: &Splats, on_cpu: &Splats) {
         share > 0.99,
         "only {:.2} % of the values agree",
         100.0 * share
+    );
+}
+
+#[test]
+fn the_label_loss_detaches_on_the_gpu_as_on_the_cpu() {
+    // Labels only, geometry frozen: the switch at step 10 scales the loss and the logits' Adam
+    // moments, which a resident run must sync, scale and upload. Its logits must follow the
+    // path of a resident run without the switch, as they do on the CPU.
+    use damage_twin::train::spec::{DensifyPolicy, ParamGroups};
+    let labels_only = |until: Option<u32>| {
+        let mut spec = spec(40);
+        spec.densify = DensifyPolicy::Off;
+        spec.groups = ParamGroups::LABELS_ONLY;
+        spec.targets.rgb_weight = 0.0;
+        spec.targets.label_weight = 1.0;
+        spec.targets.label_pos_weight = 4.0;
+        spec.targets.label_geometry_steps = until;
+        let ctx = gpu_support::context();
+        let backend = Box::new(GpuBackend::new(&ctx).unwrap());
+        let mut trainer = Trainer::with_backend(
+            spec,
+            blob_scene::initial_with_labels(1),
+            blob_scene::labelled_views(),
+            backend,
+        )
+        .unwrap();
+        assert!(trainer.is_gpu_resident());
+        train(&mut trainer);
+        trainer.into_splats().raw_labels
+    };
+    let start = blob_scene::initial_with_labels(1).raw_labels;
+    let whole = labels_only(None);
+    let switched = labels_only(Some(10));
+    let gap = |a: &[f32], b: &[f32]| {
+        a.iter()
+            .zip(b)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0f32, f32::max)
+    };
+    let travelled = gap(&whole, &start);
+    let apart = gap(&switched, &whole);
+    assert!(travelled > 0.1, "the logits did not learn: {travelled}");
+    assert!(
+        apart < 1e-3 * travelled,
+        "the switch changed the logits by {apart} (they travelled {travelled})"
     );
 }

@@ -3,28 +3,10 @@
 
 mod blob_scene;
 
-use blob_scene::{SIZE, initial_with_labels, scene};
-use damage_twin::scene::Mask;
+use blob_scene::{initial_with_labels, labelled_views};
 use damage_twin::splats::Splats;
-use damage_twin::train::spec::{DensifyPolicy, ParamGroups, TrainSpec, TrainView};
+use damage_twin::train::spec::{DensifyPolicy, ParamGroups, TrainSpec};
 use damage_twin::train::trainer::Trainer;
-
-/// The blob scene's views, each with one label mask: a square off centre, different per view,
-/// so the label loss pulls on the geometry as inconsistent masks would.
-fn labelled_views() -> Vec<TrainView> {
-    let (mut views, _) = scene();
-    for (i, view) in views.iter_mut().enumerate() {
-        let (x0, y0) = (8 + 2 * i as u32, 12 + i as u32);
-        let mut mask = Mask::empty(SIZE, SIZE);
-        for y in y0..y0 + 14 {
-            for x in x0..x0 + 10 {
-                mask.data[(y * SIZE + x) as usize] = 1;
-            }
-        }
-        view.labels = vec![mask];
-    }
-    views
-}
 
 fn initial() -> Splats {
     initial_with_labels(1)

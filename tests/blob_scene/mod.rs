@@ -5,7 +5,7 @@
 use glam::{Quat, Vec3};
 
 use damage_twin::raster::{RenderSettings, render};
-use damage_twin::scene::{Camera, Intrinsics, RgbImage};
+use damage_twin::scene::{Camera, Intrinsics, Mask, RgbImage};
 use damage_twin::splats::Splats;
 use damage_twin::splats::init::{InitOptions, from_points, random_points};
 use damage_twin::train::spec::TrainView;
@@ -94,4 +94,21 @@ pub fn initial_with_labels(label_channels: usize) -> Splats {
         },
     )
     .unwrap()
+}
+
+/// The blob scene's views, each with one label mask: a square off centre, different per view,
+/// so the label loss pulls on the geometry as inconsistent masks would.
+pub fn labelled_views() -> Vec<TrainView> {
+    let (mut views, _) = scene();
+    for (i, view) in views.iter_mut().enumerate() {
+        let (x0, y0) = (8 + 2 * i as u32, 12 + i as u32);
+        let mut mask = Mask::empty(SIZE, SIZE);
+        for y in y0..y0 + 14 {
+            for x in x0..x0 + 10 {
+                mask.data[(y * SIZE + x) as usize] = 1;
+            }
+        }
+        view.labels = vec![mask];
+    }
+    views
 }
