@@ -34,13 +34,11 @@ pub(crate) fn agreement(
 pub(crate) struct TrainingScores {
     all: DamageScores,
     noisy: DamageScores,
-    /// Per class in `DamageClass::ALL` order: (corrupted pixels the twin renders as the clean
-    /// mask has them, corrupted pixels).
-    corrected: [(u64, u64); 3],
-    /// Per class: (pixels the input has right that the twin renders wrong, pixels the input
+    /// Per class in `DamageClass::ALL` order: (pixels the input has right that the twin renders wrong, pixels the input
     /// has right).
     introduced: [(u64, u64); 3],
     /// Per class: (cut-out damage pixels the twin renders as damage, cut-out damage pixels).
+    /// With `added`, the corrupted pixels (input ≠ clean) and those the twin renders right.
     missed: [(u64, u64); 3],
     /// Per class: (added pixels the twin renders as no damage, added pixels).
     added: [(u64, u64); 3],
@@ -68,7 +66,6 @@ pub(crate) fn score_training_views(
     let mut scores = TrainingScores {
         all: DamageScores::default(),
         noisy: DamageScores::default(),
-        corrected: [(0, 0); 3],
         introduced: [(0, 0); 3],
         missed: [(0, 0); 3],
         added: [(0, 0); 3],
@@ -95,25 +92,20 @@ pub(crate) fn score_training_views(
                 }
             }
             for ((&r, &c), &p) in reference.data.iter().zip(input).zip(&predicted[k].data) {
-                let twin_right = (p != 0) == (r != 0);
-                if (r != 0) != (c != 0) {
-                    let kind = if r != 0 {
+                let damage = r != 0;
+                let twin_right = (p != 0) == damage;
+                if damage != (c != 0) {
+                    let kind = if damage {
                         &mut scores.missed[k]
                     } else {
                         &mut scores.added[k]
                     };
                     kind.1 += 1;
                     kind.0 += u64::from(twin_right);
-                }
-                let counts = if (r != 0) != (c != 0) {
-                    &mut scores.corrected[k]
                 } else {
-                    &mut scores.introduced[k]
-                };
-                counts.1 += 1;
-                // corrected counts the twin right, introduced the twin wrong.
-                if twin_right == ((r != 0) != (c != 0)) {
-                    counts.0 += 1;
+                    let counts = &mut scores.introduced[k];
+                    counts.1 += 1;
+                    counts.0 += u64::from(!twin_right);
                 }
             }
         }
@@ -171,11 +163,11 @@ pub(crate) fn rows_for(
                 .is_some_and(|a| a.true_positive + a.false_negative > 0)
         })
         .map(|&class| {
-            let (fixed, wrong) = train.corrected[class.channel()];
-            let (broken, right) = train.introduced[class.channel()];
-            let (clean_fixed, clean_wrong) = train.clean_twin[class.channel()];
             let (missed_fixed, missed) = train.missed[class.channel()];
             let (added_fixed, added) = train.added[class.channel()];
+            let (fixed, wrong) = (missed_fixed + added_fixed, missed + added);
+            let (broken, right) = train.introduced[class.channel()];
+            let (clean_fixed, clean_wrong) = train.clean_twin[class.channel()];
             let share = |part: u64, whole: u64| {
                 if whole > 0 {
                     part as f64 / whole as f64
