@@ -18,7 +18,7 @@ use damage_twin::splats::Splats;
 use damage_twin::train::job::JobOptions;
 use damage_twin::train::views::split_views;
 
-use super::write_text;
+use super::{read_saved, write_text};
 use crate::cli::args::{RunArgs, drive, open_dataset};
 use crate::cli::compact::{Finetune, compact_model, heldout_psnr};
 
@@ -87,11 +87,7 @@ fn save(out: &Path, name: &str, splats: &Splats) -> anyhow::Result<u64> {
 
 pub fn run(args: BudgetArgs) -> anyhow::Result<()> {
     if args.replot {
-        let json_path = args.out.join("budget-study.json");
-        let text = std::fs::read_to_string(&json_path)
-            .with_context(|| format!("reading {}", json_path.display()))?;
-        let file: StudyFile = serde_json::from_str(&text)
-            .with_context(|| format!("reading {}", json_path.display()))?;
+        let file: StudyFile = read_saved(&args.out, "budget-study.json")?;
         write_budget_chart(&args.out, "budget-study", &file.rows)?;
         return Ok(());
     }

@@ -16,6 +16,7 @@ use damage_twin::damage::study::{NoiseModel, StudyConfig, StudyEvent, StudyRow, 
 use damage_twin::report::study_chart::{study_csv, study_table, write_study_chart};
 use damage_twin::scene::ImageScale;
 
+use super::{read_saved, write_text};
 use crate::cli::args::{HoldoutArgs, open_dataset, palette, parse_scale, print_line};
 
 #[derive(clap::Args, Debug)]
@@ -79,15 +80,8 @@ struct SavedStudy {
 
 /// Writes the CSV, Markdown table and chart of `rows` into `dir`.
 fn write_reports(dir: &std::path::Path, rows: &[StudyRow]) -> anyhow::Result<Vec<PathBuf>> {
-    let write = |name: &str, text: String| -> anyhow::Result<()> {
-        let path = dir.join(name);
-        damage_twin::scene::atomic::write_atomic(&path, |w| {
-            std::io::Write::write_all(w, text.as_bytes())
-        })
-        .with_context(|| format!("writing {}", path.display()))
-    };
-    write("study.csv", study_csv(rows))?;
-    write("study.md", study_table(rows))?;
+    write_text(dir, "study.csv", &study_csv(rows))?;
+    write_text(dir, "study.md", &study_table(rows))?;
     Ok(write_study_chart(dir, "study", rows)?)
 }
 
@@ -111,11 +105,7 @@ struct StudyFile<'a> {
 
 pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
     if args.replot {
-        let path = args.out.join("study.json");
-        let text = std::fs::read_to_string(&path)
-            .with_context(|| format!("reading {}", path.display()))?;
-        let saved: SavedStudy = serde_json::from_str(&text)
-            .with_context(|| format!("{} is not a study.json", path.display()))?;
+        let saved: SavedStudy = read_saved(&args.out, "study.json")?;
         let charts = write_reports(&args.out, &saved.rows)?;
         eprintln!(
             "redrew {} rows into {}",
@@ -213,11 +203,11 @@ pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
         seconds,
         rows: &rows,
     };
-    let path = args.out.join("study.json");
-    damage_twin::scene::atomic::write_atomic(&path, |w| {
-        std::io::Write::write_all(w, serde_json::to_string_pretty(&file)?.as_bytes())
-    })
-    .with_context(|| format!("writing {}", path.display()))?;
+    write_text(
+        &args.out,
+        "study.json",
+        &serde_json::to_string_pretty(&file)?,
+    )?;
     let charts = write_reports(&args.out, &rows)?;
     eprintln!(
         "study done in {seconds:.0} s: {} rows; wrote study.json, study.csv, study.md and {}",

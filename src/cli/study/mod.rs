@@ -31,6 +31,18 @@ pub fn run(study: Study) -> anyhow::Result<()> {
     }
 }
 
+/// A study's saved `dir/name` (its JSON), read back for `--replot`.
+pub(crate) fn read_saved<T: serde::de::DeserializeOwned>(
+    dir: &std::path::Path,
+    name: &str,
+) -> anyhow::Result<T> {
+    use anyhow::Context;
+    let path = dir.join(name);
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{} is not a {name}", path.display()))
+}
+
 /// Writes `text` to `dir/name` atomically.
 pub(crate) fn write_text(dir: &std::path::Path, name: &str, text: &str) -> anyhow::Result<()> {
     use anyhow::Context;

@@ -19,7 +19,7 @@ use damage_twin::scene::{Dataset, ImageScale};
 use damage_twin::synth::params::SynthParams;
 use damage_twin::train::views::{Holdout, split_views};
 
-use super::write_text;
+use super::{read_saved, write_text};
 use crate::cli::args::{open_dataset, parse_scale};
 
 #[derive(clap::Args, Debug)]
@@ -112,11 +112,7 @@ fn write_reports(out: &Path, rows: &[StabilityRow]) -> anyhow::Result<()> {
 
 pub fn run(args: StabilityArgs) -> anyhow::Result<()> {
     if args.replot {
-        let path = args.out.join("stability-study.json");
-        let text = std::fs::read_to_string(&path)
-            .with_context(|| format!("reading {}", path.display()))?;
-        let saved: SavedStudy = serde_json::from_str(&text)
-            .with_context(|| format!("{} is not a stability-study.json", path.display()))?;
+        let saved: SavedStudy = read_saved(&args.out, "stability-study.json")?;
         write_reports(&args.out, &saved.rows)?;
         eprintln!("redrew {} rows in {}", saved.rows.len(), args.out.display());
         return Ok(());
