@@ -17,6 +17,7 @@ pub mod palette;
 pub mod pick;
 pub mod reference;
 pub mod refine;
+mod refine_quality;
 mod refine_selection;
 pub mod select;
 pub mod setup;

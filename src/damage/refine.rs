@@ -13,14 +13,15 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::damage::TrainMode;
-use crate::damage::evaluate::{DamageReadout, evaluate_damage};
+use crate::damage::evaluate::DamageReadout;
 use crate::damage::hulls::{Hull, HullConfig, union_mask, view_hulls};
-use crate::damage::reference::{load_reference_views, reference_source};
+pub use crate::damage::refine_quality::Quality;
+use crate::damage::refine_quality::{full_step_ms, quality};
 use crate::damage::refine_selection::{given_selection, region_labels, select_by_masks};
 use crate::damage::select::{SelectConfig, Selection};
 use crate::damage::setup::apply_mode;
+use crate::raster::RenderSettings;
 use crate::raster::weight_lift::WeightLift;
-use crate::raster::{RenderSettings, render};
 use crate::scene::project::ColourTransform;
 use crate::scene::{Dataset, ImageScale, Mask};
 use crate::splats::Splats;
@@ -29,7 +30,6 @@ use crate::train::densify::DensifyConfig;
 use crate::train::job::{Job, JobContext, JobError, JobOptions, Progress};
 use crate::train::run::{TrainSetup, run_training};
 use crate::train::spec::{DensifyPolicy, TrainSpec, TrainView, densify_for_iterations};
-use crate::train::trainer::Trainer;
 use crate::train::views::{Holdout, load_views, split_views};
 
 /// Fine-tune the selection as it is, or let it densify (clone, split, prune) as it trains.
@@ -152,18 +152,6 @@ impl ViewHulls {
     pub fn union(&self) -> Mask {
         union_mask(&self.hulls, self.width, self.height)
     }
-}
-
-/// Damage and image quality on the held-out views at the refinement scale.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct Quality {
-    pub iou: BTreeMap<String, f64>,
-    pub precision: BTreeMap<String, f64>,
-    pub recall: BTreeMap<String, f64>,
-    /// PSNR over the held-out pixels outside every hull (where nothing should change).
-    pub psnr_outside_hulls: Option<f64>,
-    /// PSNR over whole held-out images.
-    pub psnr: Option<f64>,
 }
 
 /// Seconds per phase.
@@ -520,37 +508,8 @@ fn refine_spec(config: &RefineConfig, model: &Splats, labels: bool) -> TrainSpec
     spec
 }
 
-/// Milliseconds per step of the same run on uncropped views (up to four of the trained ones).
-fn full_step_ms(
-    dataset: &Dataset,
-    model: &Splats,
-    spec: &TrainSpec,
-    trained: &[&ViewHulls],
-    config: &RefineConfig,
-    mode: TrainMode,
-) -> Result<f64, JobError> {
-    const STEPS: u32 = 8;
-    let indices: Vec<usize> = trained.iter().take(4).map(|v| v.index).collect();
-    let mut views = load_views(dataset, &indices, config.scale, mode.uses_masks())?;
-    to_twin_look(&mut views, &indices, config);
-    apply_mode(&mut views, mode, &config.select.palette);
-    let timing_spec = TrainSpec {
-        iterations: STEPS,
-        densify: DensifyPolicy::Off,
-        ..spec.clone()
-    };
-    let mut trainer = Trainer::new(timing_spec, model.clone(), views)?;
-    // One warm-up step sizes the buffers.
-    trainer.step();
-    let t = Instant::now();
-    while !trainer.is_done() {
-        trainer.step();
-    }
-    Ok(t.elapsed().as_secs_f64() * 1000.0 / (STEPS - 1) as f64)
-}
-
 /// Maps the photos of `views` (dataset indices `indices`) into the twin's light.
-fn to_twin_look(views: &mut [TrainView], indices: &[usize], config: &RefineConfig) {
+pub(super) fn to_twin_look(views: &mut [TrainView], indices: &[usize], config: &RefineConfig) {
     for (view, index) in views.iter_mut().zip(indices) {
         if let Some(transform) = config.appearance.get(index) {
             transform.undo(&mut view.image);
@@ -572,57 +531,4 @@ fn mark_refined(refined: &mut Splats, input: &Splats, selection: &Selection) {
             refined.meta.state[g] |= state::REFINED;
         }
     }
-}
-
-/// Damage figures against the reference masks and PSNR (whole and outside the hulls) on the
-/// held-out views at the refinement scale.
-fn quality(
-    dataset: &Dataset,
-    splats: &Splats,
-    heldout: &[&ViewHulls],
-    config: &RefineConfig,
-    readout: &DamageReadout,
-) -> Result<Quality, JobError> {
-    let indices: Vec<usize> = heldout.iter().map(|v| v.index).collect();
-    let mut q = Quality::default();
-    if indices.is_empty() {
-        return Ok(q);
-    }
-    if let Some(source) = reference_source(dataset) {
-        let views = load_reference_views(dataset, &source, &indices, config.scale)?;
-        let figures = evaluate_damage(splats, &views, readout, config.background).figures();
-        q.iou = figures.iou;
-        q.precision = figures.precision;
-        q.recall = figures.recall;
-    }
-    let mut photos = load_views(dataset, &indices, config.scale, false)?;
-    to_twin_look(&mut photos, &indices, config);
-    let settings = RenderSettings::new(config.background, splats.sh_degree);
-    let (mut se_out, mut n_out, mut se_all, mut n_all) = (0.0f64, 0usize, 0.0f64, 0usize);
-    for (photo, v) in photos.iter().zip(heldout) {
-        let out = render(splats, &photo.camera, &settings);
-        let inside = v.union();
-        for (p, (rgb, target)) in out
-            .color
-            .chunks_exact(3)
-            .zip(photo.image.data.chunks_exact(3))
-            .enumerate()
-        {
-            let se: f64 = rgb
-                .iter()
-                .zip(target)
-                .map(|(a, b)| f64::from(a - b).powi(2))
-                .sum();
-            se_all += se;
-            n_all += 3;
-            if inside.data[p] == 0 {
-                se_out += se;
-                n_out += 3;
-            }
-        }
-    }
-    let psnr = |se: f64, n: usize| (n > 0).then(|| -10.0 * (se / n as f64).max(1e-12).log10());
-    q.psnr_outside_hulls = psnr(se_out, n_out);
-    q.psnr = psnr(se_all, n_all);
-    Ok(q)
 }
