@@ -209,6 +209,7 @@ fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks
         threads: None,
         fine_iterations: 0,
         fine_label_geometry_until: None,
+        fine_label_pos_weight: 2.0,
         fine_work_dir: std::env::temp_dir(),
     };
     let mut finished = 0;

@@ -91,6 +91,9 @@ pub struct StudyConfig {
     /// (`run.label_geometry_until`): at full resolution the fine-tune's work is to reshape the
     /// damage's geometry to the masks.
     pub fine_label_geometry_until: Option<f32>,
+    /// Weight of damage pixels in the fine-tune's label cross-entropy
+    /// (`RefineConfig::label_pos_weight`).
+    pub fine_label_pos_weight: f32,
     /// Where the fine-tune's corrupted full-resolution masks are written while it runs.
     pub fine_work_dir: std::path::PathBuf,
 }

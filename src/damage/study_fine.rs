@@ -87,6 +87,7 @@ pub(crate) fn fine_rows(
         seed: config.run.seed,
         label_weight: config.run.label_weight,
         label_geometry_until: config.fine_label_geometry_until,
+        label_pos_weight: config.fine_label_pos_weight,
         ..RefineConfig::default()
     };
     let dataset_arc = Arc::new(fine_dataset);

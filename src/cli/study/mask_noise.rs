@@ -11,6 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
 use damage_twin::damage::TrainMode;
+use damage_twin::damage::refine::RefineConfig;
 use damage_twin::damage::setup::RunConfig;
 use damage_twin::damage::study::{NoiseModel, StudyConfig, StudyEvent, StudyRow, run_study};
 use damage_twin::report::study_chart::{study_csv, study_table, write_study_chart};
@@ -61,6 +62,10 @@ pub struct MaskNoiseArgs {
     /// The same for the full-resolution fine-tune (default: the whole fine-tune).
     #[arg(long, value_name = "FRACTION")]
     pub fine_label_geometry_until: Option<f32>,
+    /// Weight of damage pixels in the full-resolution fine-tune's label cross-entropy (default:
+    /// the refinement's).
+    #[arg(long, default_value_t = RefineConfig::default().label_pos_weight)]
+    pub fine_label_pos_weight: f32,
     /// Class colour override for overlay mode, class=r,g,b (repeatable).
     #[arg(long = "colour")]
     pub colours: Vec<String>,
@@ -97,6 +102,7 @@ struct StudyFile<'a> {
     label_geometry_until: Option<f32>,
     fine_label_geometry_until: Option<f32>,
     label_pos_weight: f32,
+    fine_label_pos_weight: f32,
     scale: ImageScale,
     seed: u64,
     seconds: f64,
@@ -140,6 +146,7 @@ pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
         threads: args.threads,
         fine_iterations: args.fine_iters,
         fine_label_geometry_until: args.fine_label_geometry_until,
+        fine_label_pos_weight: args.fine_label_pos_weight,
         fine_work_dir: args.out.clone(),
     };
     let runs = args.rates.len() * args.modes.len();
@@ -198,6 +205,7 @@ pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
         label_geometry_until: args.label_geometry_until,
         fine_label_geometry_until: args.fine_label_geometry_until,
         label_pos_weight: args.label_pos_weight,
+        fine_label_pos_weight: args.fine_label_pos_weight,
         scale: args.scale,
         seed: args.seed,
         seconds,
