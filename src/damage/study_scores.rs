@@ -34,8 +34,8 @@ pub(crate) fn agreement(
 pub(crate) struct TrainingScores {
     all: DamageScores,
     noisy: DamageScores,
-    /// Per class in `DamageClass::ALL` order: (pixels the input has right that the twin renders wrong, pixels the input
-    /// has right).
+    /// Per class in `DamageClass::ALL` order: (pixels the input has right that the twin renders
+    /// wrong, pixels the input has right).
     introduced: [(u64, u64); 3],
     /// Per class: (cut-out damage pixels the twin renders as damage, cut-out damage pixels).
     /// With `added`, the corrupted pixels (input ≠ clean) and those the twin renders right.
@@ -82,16 +82,12 @@ pub(crate) fn score_training_views(
         for (k, reference) in view.reference.iter().enumerate() {
             let Some(reference) = reference else { continue };
             let input = &corrupted[i][k].data;
-            if let Some(clean_twin) = clean_twin.and_then(|c| c.get(i)).and_then(|m| m.get(k)) {
-                let counts = &mut scores.clean_twin[k];
-                for ((&r, &c), &p) in reference.data.iter().zip(input).zip(&clean_twin.data) {
-                    if (r != 0) != (c != 0) {
-                        counts.1 += 1;
-                        counts.0 += u64::from((p != 0) == (r != 0));
-                    }
-                }
-            }
-            for ((&r, &c), &p) in reference.data.iter().zip(input).zip(&predicted[k].data) {
+            let clean_twin = clean_twin
+                .and_then(|c| c.get(i))
+                .and_then(|m| m.get(k))
+                .map(|m| &m.data[..]);
+            let pixels = reference.data.iter().zip(input).zip(&predicted[k].data);
+            for (px, ((&r, &c), &p)) in pixels.enumerate() {
                 let damage = r != 0;
                 let twin_right = (p != 0) == damage;
                 if damage != (c != 0) {
@@ -102,6 +98,11 @@ pub(crate) fn score_training_views(
                     };
                     kind.1 += 1;
                     kind.0 += u64::from(twin_right);
+                    if let Some(&t) = clean_twin.and_then(|m| m.get(px)) {
+                        let counts = &mut scores.clean_twin[k];
+                        counts.1 += 1;
+                        counts.0 += u64::from((t != 0) == damage);
+                    }
                 } else {
                     let counts = &mut scores.introduced[k];
                     counts.1 += 1;
