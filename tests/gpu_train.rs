@@ -204,14 +204,8 @@ fn the_label_loss_detaches_on_the_gpu_as_on_the_cpu() {
     let start = blob_scene::initial_with_labels(1).raw_labels;
     let whole = labels_only(None);
     let switched = labels_only(Some(10));
-    let gap = |a: &[f32], b: &[f32]| {
-        a.iter()
-            .zip(b)
-            .map(|(p, q)| (p - q).abs())
-            .fold(0.0f32, f32::max)
-    };
-    let travelled = gap(&whole, &start);
-    let apart = gap(&switched, &whole);
+    let travelled = blob_scene::max_gap(&whole, &start);
+    let apart = blob_scene::max_gap(&switched, &whole);
     assert!(travelled > 0.1, "the logits did not learn: {travelled}");
     assert!(
         apart < 1e-3 * travelled,

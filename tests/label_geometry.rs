@@ -3,7 +3,7 @@
 
 mod blob_scene;
 
-use blob_scene::{initial_with_labels, labelled_views};
+use blob_scene::{initial_with_labels, labelled_views, max_gap};
 use damage_twin::splats::Splats;
 use damage_twin::train::spec::{DensifyPolicy, ParamGroups, TrainSpec};
 use damage_twin::train::trainer::Trainer;
@@ -37,13 +37,6 @@ fn max_mean_gap(a: &Splats, b: &Splats) -> f32 {
         .iter()
         .zip(&b.means)
         .map(|(p, q)| (*p - *q).abs().max_element())
-        .fold(0.0, f32::max)
-}
-
-fn max_gap(a: &[f32], b: &[f32]) -> f32 {
-    a.iter()
-        .zip(b)
-        .map(|(p, q)| (p - q).abs())
         .fold(0.0, f32::max)
 }
 

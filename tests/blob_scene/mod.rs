@@ -112,3 +112,11 @@ pub fn labelled_views() -> Vec<TrainView> {
     }
     views
 }
+
+/// The largest absolute difference between two equally long parameter arrays.
+pub fn max_gap(a: &[f32], b: &[f32]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (p - q).abs())
+        .fold(0.0, f32::max)
+}
