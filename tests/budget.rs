@@ -49,6 +49,34 @@ fn budgeted_training_and_compact_keep_their_counts() {
         trained >= 200,
         "the prune keeps the budget, not far less: {trained}"
     );
+    // The count over the run (curve.csv logs it every 10 steps): density control never grows it
+    // past twice the budget (the 1 803 SfM points here are more than that already, so it only
+    // prunes), and the importance prune comes at 3/4 of the run (step 225), not before.
+    let curve = std::fs::read_to_string(run.join("curve.csv")).expect("curve.csv");
+    let counts: Vec<(u64, u64)> = curve
+        .lines()
+        .skip(1)
+        .map(|line| {
+            let mut fields = line.split(',');
+            let step = fields.next().and_then(|f| f.parse().ok()).expect("step");
+            let count = fields
+                .nth(2)
+                .and_then(|f| f.parse().ok())
+                .expect("gaussians");
+            (step, count)
+        })
+        .collect();
+    let initial = counts.first().expect("a curve").1;
+    for &(step, count) in &counts {
+        if step < 225 {
+            assert!(
+                count > 300 && count <= initial.max(600),
+                "{count} Gaussians at step {step}: pruned early or grown past twice the budget"
+            );
+        } else {
+            assert!(count <= 300, "not pruned by step {step}: {count}");
+        }
+    }
 
     let model = run.join("model.ply");
     let out = dir.path().join("compact.ply");

@@ -41,8 +41,8 @@ pub struct Args {
     #[arg(long)]
     pub max_gaussians: Option<usize>,
     /// Most Gaussians the model ends with: density control grows to twice this, the least
-    /// important (least blending weight over the training views) are pruned at the end of
-    /// densification, and training goes on. A count only (see `compact` for fractions).
+    /// important (least blending weight over the training views) are pruned at 3/4 of the run,
+    /// and training goes on. A count only (see `compact` for fractions).
     #[arg(long, value_parser = super::compact::parse_train_budget)]
     pub budget: Option<usize>,
     /// Learn each photo's exposure and white balance (a gain and offset per channel) with the

@@ -79,8 +79,8 @@ pub struct RunConfig {
     /// Cap on the Gaussian count (None: adaptive density control as in 3DGS).
     pub max_gaussians: Option<usize>,
     /// Most Gaussians the model ends with: density control may grow past it, then the least
-    /// important (least blending weight over the training views) are pruned at the end of
-    /// densification and training goes on (`train::spec::densify_for_budget`). Wins over
+    /// important (least blending weight over the training views) are pruned at 3/4 of the run
+    /// and training goes on (`train::spec::densify_for_budget`). Wins over
     /// `max_gaussians`.
     pub budget: Option<usize>,
     /// Learn each training photo's exposure and white balance (`train::appearance`).

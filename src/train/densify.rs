@@ -43,9 +43,12 @@ pub struct DensifyConfig {
     /// Cap on the Gaussian count: densify the highest gradients first until the cap.
     pub budget: Option<usize>,
     /// When set, the trainer prunes the model to this many Gaussians by importance (blending
-    /// weight over the training views, `train::importance`) at the end of the densification
-    /// window, then trains on (`--budget`). The densifier itself never reads it.
+    /// weight over the training views, `train::importance`) at step `prune_at`, then trains on
+    /// (`--budget`). The densifier itself never reads it.
     pub prune_to: Option<usize>,
+    /// The step of that prune; `None`: the end of the densification window (`stop`). Either is
+    /// brought forward to the run's last step when the run ends first.
+    pub prune_at: Option<u32>,
     pub seed: u64,
 }
 
@@ -66,6 +69,7 @@ impl Default for DensifyConfig {
             reset_opacity_at_start: false,
             budget: None,
             prune_to: None,
+            prune_at: None,
             seed: 0,
         }
     }

@@ -544,12 +544,14 @@ impl Trainer {
         }
     }
 
-    /// The budget to prune to at `step`: the end of the densification window (or of the run,
-    /// when that comes first) of a spec with `DensifyConfig::prune_to`, if the model exceeds it.
+    /// The budget to prune to at `step`: `DensifyConfig::prune_at` (by default the end of the
+    /// densification window; the run's last step when the run ends first) of a spec with
+    /// `DensifyConfig::prune_to`, if the model exceeds it.
     fn importance_prune_due(&self, step: u32) -> Option<usize> {
         let config = &self.densifier.as_ref()?.config;
         let keep = config.prune_to?;
-        (step == config.stop.min(self.spec.iterations) && self.splats.len() > keep).then_some(keep)
+        let at = config.prune_at.unwrap_or(config.stop);
+        (step == at.min(self.spec.iterations) && self.splats.len() > keep).then_some(keep)
     }
 
     /// Prunes to the `keep` Gaussians with the most blending weight over the training views,
