@@ -11,7 +11,7 @@ use super::kernel::{self, Bind};
 use super::splat_buffers::{GeometryLayout, SplatBuffers};
 use super::{GpuContext, GpuError, readback};
 
-const SHADER: &str = super::project::stage_source!("adam.wgsl");
+const SHADER: &str = super::kernel::stage_source!("adam.wgsl");
 
 /// Floats per Gaussian in the geometry buffer (`splat_buffers`).
 const GEOMETRY_FLOATS: usize = 11;

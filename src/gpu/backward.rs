@@ -3,8 +3,8 @@
 //! Gaussian, screen-space → parameter gradients), and the buffers between them. They replay the
 //! renderer's last forward (its projection, sorted intersections and per-pixel state).
 
+use super::kernel::stage_source;
 use super::kernel::{self, Bind};
-use super::project::stage_source;
 use super::renderer::ForwardState;
 
 const RASTERIZE_BACKWARD: &str = stage_source!("rasterize_backward.wgsl");

@@ -2,9 +2,9 @@
 //! in depth order, scanned into write offsets, then one (tile, gaussian) pair per intersection.
 //! The total stays on the GPU (`isect_count`); nothing here reads it back.
 
+use super::kernel::stage_source;
 use super::kernel::{self, Bind};
 use super::prefix_sum::{PrefixSum, ScanLen};
-use super::project::stage_source;
 
 const SHADER: &str = stage_source!("emit_intersections.wgsl");
 

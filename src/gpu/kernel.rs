@@ -2,6 +2,17 @@
 //! bind groups from a list of buffers, and dispatch sizes that respect the 65535-per-dimension
 //! limit. Kernels themselves live in `shaders/`; nothing stage-specific belongs here.
 
+/// `shaders/common.wgsl` prepended to a stage's own source.
+macro_rules! stage_source {
+    ($file:literal) => {
+        concat!(
+            include_str!("../../shaders/common.wgsl"),
+            include_str!(concat!("../../shaders/", $file))
+        )
+    };
+}
+pub(crate) use stage_source;
+
 /// Threads per workgroup of the 1D kernels (all our 1D kernels use 256).
 pub const WORKGROUP: u32 = 256;
 

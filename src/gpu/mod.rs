@@ -16,6 +16,7 @@ pub mod project;
 pub mod radix_sort;
 pub mod rasterize;
 pub mod readback;
+pub mod render_settings;
 pub mod renderer;
 pub mod select;
 pub mod splat_buffers;
@@ -24,7 +25,8 @@ pub mod timing;
 pub mod train_backend;
 
 pub use context::{GpuCapabilities, GpuContext};
-pub use renderer::{GpuFrame, GpuRenderSettings, GpuRenderer};
+pub use render_settings::GpuRenderSettings;
+pub use renderer::{GpuFrame, GpuRenderer};
 pub use splat_buffers::SplatBuffers;
 pub use train_backend::{GpuBackend, StepProfile};
 

@@ -1,22 +1,11 @@
 //! Host side of `shaders/project.wgsl` (stage 1: project + cull), and the two layouts every splat
 //! stage shares with `shaders/common.wgsl`: the per-frame uniforms and the projected splat.
 
-use super::kernel::{self, Bind};
-use super::renderer::GpuRenderSettings;
+use super::kernel::{self, Bind, stage_source};
+use super::render_settings::GpuRenderSettings;
 use super::splat_buffers::SplatBuffers;
 use crate::scene::Camera;
 use bytemuck::{Pod, Zeroable};
-
-/// `shaders/common.wgsl` prepended to a stage's own source.
-macro_rules! stage_source {
-    ($file:literal) => {
-        concat!(
-            include_str!("../../shaders/common.wgsl"),
-            include_str!(concat!("../../shaders/", $file))
-        )
-    };
-}
-pub(crate) use stage_source;
 
 const SHADER: &str = stage_source!("project.wgsl");
 

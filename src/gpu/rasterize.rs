@@ -1,8 +1,8 @@
 //! Host side of `shaders/rasterize.wgsl` (stage 6): one 16×16 workgroup per tile blending its
 //! depth-ordered Gaussians into colour, alpha, depth, label channels and a display texture.
 
+use super::kernel::stage_source;
 use super::kernel::{self, Bind};
-use super::project::stage_source;
 
 const SHADER: &str = stage_source!("rasterize.wgsl");
 

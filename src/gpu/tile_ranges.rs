@@ -2,8 +2,8 @@
 //! intersections in the tile-sorted list. Dispatched indirectly from the tile sort's GPU-side
 //! sizes (same 1024 elements per workgroup), so the count is never read back.
 
+use super::kernel::stage_source;
 use super::kernel::{self, Bind};
-use super::project::stage_source;
 
 const SHADER: &str = stage_source!("tile_ranges.wgsl");
 

@@ -18,7 +18,7 @@ use super::damage::{
 };
 use super::geometry::{Component, Geometry};
 use super::params::SynthError;
-use crate::damage::DamageClass;
+use crate::scene::DamageClass;
 
 /// Centre lines (cracks, bars) are measured at the midpoints of 5 mm steps: a crack is grown in
 /// 35 mm steps, so each step is split in seven and a crack leaving a surface is cut within 5 mm.

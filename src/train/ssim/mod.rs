@@ -562,5 +562,4 @@ fn ssim_in_bands(
 }
 
 #[cfg(test)]
-#[path = "ssim_tests.rs"]
 mod tests;

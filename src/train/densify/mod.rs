@@ -407,5 +407,4 @@ impl Densifier {
 }
 
 #[cfg(test)]
-#[path = "densify_tests.rs"]
 mod tests;

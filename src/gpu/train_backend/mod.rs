@@ -29,7 +29,6 @@ pub struct GpuBackend {
     loss: Option<super::loss::GpuLoss>,
 }
 
-#[path = "resident.rs"]
 mod resident;
 
 impl GpuBackend {

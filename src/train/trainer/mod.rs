@@ -119,13 +119,9 @@ pub struct StepReport {
 /// the drift it removes is slow, and each pin rescales every SH coefficient.
 const APPEARANCE_RECENTRE_EVERY: u32 = 100;
 
-#[path = "checkpoint.rs"]
 mod checkpoint;
-#[path = "resident.rs"]
 mod resident;
-#[path = "step_loss.rs"]
 mod step_loss;
-#[path = "trainer_inputs.rs"]
 mod trainer_inputs;
 use checkpoint::Checkpoint;
 use trainer_inputs::{check_view, region_tiles};

@@ -8,7 +8,6 @@ use super::schedule::ExponentialLr;
 use crate::splats::Splats;
 use update::{Update, update_group, update_sh_groups};
 
-#[path = "adam_update.rs"]
 mod update;
 
 /// The trainable parameter groups, in the order of every `[_; 7]` array in this module.
@@ -483,5 +482,4 @@ impl Adam {
 }
 
 #[cfg(test)]
-#[path = "adam_tests.rs"]
 mod tests;

@@ -2,8 +2,6 @@
 //! per-frame scratch and the stages, records the whole forward pass into a caller's encoder
 //! (viewer) or renders to CPU images (tests, CLI). No kernel code, no UI code.
 
-use glam::Vec3;
-
 use super::count_probe::CountProbe;
 use super::emit::{EmitBuffers, EmitStage};
 use super::frame_buffers::{FrameBuffers, IsectBuffers};
@@ -12,47 +10,15 @@ use super::prefix_sum::PrefixSum;
 use super::project::{FrameUniforms, ProjectOutputs, ProjectStage, tile_bounds};
 use super::radix_sort::{RadixSort, SortedIn, bits_for};
 use super::rasterize::{RasterBuffers, RasterizeStage};
+use super::render_settings::GpuRenderSettings;
 use super::splat_buffers::SplatBuffers;
 use super::tile_ranges::TileRangesStage;
 use super::timing::Stage;
 use super::{GpuContext, GpuError, readback};
-use crate::raster::RenderSettings;
 use crate::scene::{Camera, RgbImage};
 use crate::splats::Splats;
 
-#[path = "renderer_stages.rs"]
 mod stages;
-
-/// Render options (the GPU twin of `raster::RenderSettings`).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct GpuRenderSettings {
-    /// Composited behind the splats: `C + T_final · background`.
-    pub background: Vec3,
-    /// Active SH degree; clamped to the model's.
-    pub sh_degree: u32,
-    /// `alpha = min(alpha_max, opacity · exp(-power))`: 0.99 in 3DGS (default), 0.999 in gsplat.
-    pub alpha_max: f32,
-    /// Backward only (see `raster::RenderSettings::sh_direction_grad`).
-    pub sh_direction_grad: bool,
-}
-
-impl Default for GpuRenderSettings {
-    fn default() -> Self {
-        GpuRenderSettings::from(&RenderSettings::default())
-    }
-}
-
-impl From<&RenderSettings> for GpuRenderSettings {
-    /// The forward part of the CPU settings (the backward-only options do not apply).
-    fn from(s: &RenderSettings) -> Self {
-        GpuRenderSettings {
-            background: s.background,
-            sh_degree: s.sh_degree,
-            alpha_max: s.alpha_max,
-            sh_direction_grad: s.sh_direction_grad,
-        }
-    }
-}
 
 /// A rendered frame read back to the CPU (same channels and conventions as `raster::RenderOutput`).
 #[derive(Clone, Debug, Default, PartialEq)]
