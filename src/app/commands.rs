@@ -57,6 +57,15 @@ pub enum Command {
     SnapToView(usize),
     /// Leave the snapped view (navigation continues from it).
     Unsnap,
+    /// Move the free camera by one frame of navigation input (its easing included). The
+    /// viewport sends one every frame it is not snapped, having drawn with the same move.
+    MoveCamera(crate::app::camera_controller::CameraInput),
+    /// The viewport's size in pixels as laid out this frame, and the frame's statistics (for PNG
+    /// export at screen size and for the statistics panel).
+    RecordViewportFrame {
+        pixels: [u32; 2],
+        stats: crate::app::viewport::FrameStats,
+    },
     /// Frame the whole scene again.
     ResetView,
     /// Replace the settings (panels edit a copy and submit it).

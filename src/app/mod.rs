@@ -296,7 +296,11 @@ impl eframe::App for TwinApp {
                 .show(ui, |ui| self.timeline.ui(ui, state, commands));
         }
         egui::CentralPanel::no_frame().show(ui, |ui| {
-            self.viewport.ui(ui, &mut self.state, &mut self.commands);
+            // What the viewport drew with applies now, not after the next frame's panels: they
+            // and the queued commands see the camera and size the picture shows.
+            for command in self.viewport.ui(ui, &self.state, &mut self.commands) {
+                self.state.apply(command);
+            }
         });
         if self.demo.is_some()
             || self.state.measuring

@@ -27,9 +27,11 @@ mod picking;
 mod refining;
 mod saving;
 mod timeline;
+mod view;
 
 pub use refining::RefineSession;
 pub use timeline::{LoadedSurvey, TimelineJob, TimelineView, TimelineWork, survey_dataset};
+pub use view::view_camera;
 
 /// Most log lines kept for the log panel.
 const LOG_LINES: usize = 200;
@@ -211,15 +213,6 @@ impl AppState {
             .and_then(|s| s.dataset.as_ref())
             .map(|d| d.views.iter().map(|v| v.camera).collect())
             .unwrap_or_default()
-    }
-
-    /// The camera the viewport renders with at `width × height` pixels: the snapped survey
-    /// camera (scaled to fit, aspect kept by the viewport) or the free camera.
-    pub fn view_camera(&self, width: u32, height: u32) -> Camera {
-        match &self.snap {
-            Some(snap) => snap.camera.resized(width, height),
-            None => self.camera.camera(width, height),
-        }
     }
 
     /// Drains worker results and training events without blocking. Returns true when anything
@@ -503,19 +496,13 @@ impl AppState {
             }
             Command::Undo => self.undo_redo(false),
             Command::Redo => self.undo_redo(true),
-            Command::Unsnap => {
-                if let Some(snap) = self.snap.take() {
-                    self.camera.snap_to(&snap.camera);
-                }
+            Command::Unsnap => self.unsnap(),
+            Command::MoveCamera(input) => self.camera.update(&input),
+            Command::RecordViewportFrame { pixels, stats } => {
+                self.viewport_pixels = pixels;
+                self.frame_stats = stats;
             }
-            Command::ResetView => {
-                self.snap = None;
-                if let Some(scene) = &self.scene {
-                    self.camera = scene.frame.controller();
-                }
-                self.camera.mode = self.settings.nav_mode;
-                self.camera.fov_y = self.settings.fov_deg.to_radians();
-            }
+            Command::ResetView => self.reset_view(),
             Command::UpdateSettings(settings) => {
                 let settings = settings.sanitised();
                 self.camera.mode = settings.nav_mode;
@@ -533,36 +520,6 @@ impl AppState {
         match result {
             Ok(()) => self.log_line(success),
             Err(e) => self.log_line(format!("error: {e:#}")),
-        }
-    }
-
-    pub(super) fn snap_to(&mut self, index: usize) {
-        let Some(dataset) = self.scene.as_ref().and_then(|s| s.dataset.clone()) else {
-            return;
-        };
-        let Some(view) = dataset.views.get(index) else {
-            self.log_line(format!("no survey view {index}"));
-            return;
-        };
-        let change_map = self
-            .timeline
-            .as_ref()
-            .filter(|t| t.show_change_maps)
-            .and_then(|t| t.change_map(&view.name));
-        self.snap = Some(Snap {
-            view: index,
-            camera: view.camera,
-            photo: Photo::Loading,
-            change_map: change_map.is_some(),
-        });
-        match change_map {
-            Some(path) => workers::load_picture(path, index, self.results_sender()),
-            None => workers::load_photo(
-                dataset,
-                index,
-                self.settings.show_ignore_masks,
-                self.results_sender(),
-            ),
         }
     }
 

@@ -1,29 +1,30 @@
 //! The 3D viewport: turns mouse and keys into camera input (orbit / pan / zoom, fly with
 //! WASD/QE), picks the render resolution, draws the splats through the GPU paint callback, then
 //! the grid, the survey frusta (click one to snap to it) and the photo comparison on top.
-//! The camera is view state and changes here directly; everything else goes through commands.
+//! It reads the state and changes it only through commands: what this frame drew with (the
+//! camera's move, the viewport's size) goes back to the app at once, the rest waits in the queue.
 
+mod navigation;
+mod overlays;
 mod photo;
 mod pictures;
 
 use std::sync::Arc;
 
-use glam::{Vec2, Vec3};
-
-use crate::app::camera_controller::CameraInput;
 use crate::app::commands::Command;
 use crate::app::cpu_view::CpuView;
 use crate::app::frame_log::FrameLog;
-use crate::app::overlay::{self, SegmentKind};
 use crate::app::resolution::{AdaptiveResolution, FrameSample, scaled_size};
 use crate::app::settings::ViewportRenderer;
 use crate::app::settings::{CompareMode, SurveyLayout};
 use crate::app::splat_view::{SLOTS, SplatView};
-use crate::app::state::AppState;
+use crate::app::state::{AppState, Snap};
 use crate::app::tools::ToolState;
 use crate::scene::{Camera, RgbImage};
+use crate::splats::Splats;
 use crate::splats::selection::SetOp;
-use pictures::Picture;
+use navigation::{FrameView, navigate};
+use overlays::{draw_overlays, snap_on_frustum_click};
 
 /// Frame statistics the statistics panel shows.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,41 +66,69 @@ pub struct Viewport {
     pub tools: ToolState,
 }
 
-/// Reads navigation input for this frame (keys only when no text field has focus).
-fn camera_input(ui: &egui::Ui, response: &egui::Response, viewport_height: f32) -> CameraInput {
-    let mut input = CameraInput {
-        viewport_height,
-        ..CameraInput::default()
-    };
-    let keys_free = !ui.ctx().egui_wants_keyboard_input();
-    ui.input(|i| {
-        input.dt = i.stable_dt.min(0.1);
-        if response.hovered() {
-            input.zoom = i.smooth_scroll_delta.y;
-        }
-        if keys_free {
-            let axis = |pos: egui::Key, neg: egui::Key| {
-                f32::from(u8::from(i.key_down(pos))) - f32::from(u8::from(i.key_down(neg)))
-            };
-            input.fly = Vec3::new(
-                axis(egui::Key::D, egui::Key::A),
-                axis(egui::Key::E, egui::Key::Q),
-                axis(egui::Key::W, egui::Key::S),
-            );
-            input.boost = i.modifiers.shift;
-        }
+/// What one frame draws where, and with which renderer, worked out before anything is drawn.
+struct FramePlan {
+    /// The whole viewport, in points.
+    full: egui::Rect,
+    /// Where the model is rendered.
+    render_rect: egui::Rect,
+    /// Where the snapped view's photo goes (None when not snapped).
+    photo_rect: Option<egui::Rect>,
+    /// The survey compared with the one shown, and its model.
+    compared: Option<(usize, Arc<Splats>)>,
+    /// The compared survey's picture goes beside the shown one (else under it, split by the
+    /// swipe handle).
+    side_by_side: bool,
+    /// The CPU workers draw the splats this frame, not the GPU pass.
+    use_cpu: bool,
+}
+
+/// Where the render and the snapped view's photo go in `full`: at the snapped camera's aspect
+/// (the photo in the left half when side by side), else the whole viewport (its right half when
+/// a compared survey's picture is beside it).
+fn picture_rects(
+    full: egui::Rect,
+    snap: Option<&Snap>,
+    compare: CompareMode,
+    compared_beside: bool,
+) -> (egui::Rect, Option<egui::Rect>) {
+    let snap_aspect = snap.map(|s| {
+        let k = s.camera.intrinsics;
+        (k.width as f32, k.height as f32)
     });
-    let delta = response.drag_delta();
-    let delta = Vec2::new(delta.x, delta.y);
-    let pan_drag = response.dragged_by(egui::PointerButton::Secondary)
-        || response.dragged_by(egui::PointerButton::Middle)
-        || (response.dragged_by(egui::PointerButton::Primary) && ui.input(|i| i.modifiers.shift));
-    if pan_drag {
-        input.pan = delta;
-    } else if response.dragged_by(egui::PointerButton::Primary) {
-        input.rotate = delta;
+    match snap_aspect {
+        Some((w, h)) if compare == CompareMode::SideBySide => {
+            let (left, right) = full.split_left_right_at_fraction(0.5);
+            (fit_aspect(right, w, h), Some(fit_aspect(left, w, h)))
+        }
+        Some((w, h)) => {
+            let r = fit_aspect(full, w, h);
+            (r, Some(r))
+        }
+        None if compared_beside => (full.split_left_right_at_fraction(0.5).1, None),
+        None => (full, None),
     }
-    input
+}
+
+/// The render rectangle's size in pixels, and the size rendered at `scale` of it.
+fn render_sizes(
+    render_rect: egui::Rect,
+    pixels_per_point: f32,
+    scale: f32,
+) -> ([u32; 2], [u32; 2]) {
+    let px_w = (render_rect.width() * pixels_per_point).round().max(1.0) as u32;
+    let px_h = (render_rect.height() * pixels_per_point).round().max(1.0) as u32;
+    let (rw, rh) = scaled_size(px_w, px_h, scale);
+    ([px_w, px_h], [rw, rh])
+}
+
+/// The settings' background colour (0–1 channels) as egui paints it.
+fn background_colour(bg: [f32; 3]) -> egui::Color32 {
+    egui::Color32::from_rgb(
+        (bg[0] * 255.0) as u8,
+        (bg[1] * 255.0) as u8,
+        (bg[2] * 255.0) as u8,
+    )
 }
 
 /// The largest rectangle of aspect `w / h` centred in `rect`.
@@ -147,100 +176,136 @@ impl Viewport {
         }
     }
 
-    pub fn ui(&mut self, ui: &mut egui::Ui, state: &mut AppState, commands: &mut Vec<Command>) {
+    /// Draws this frame. The selection tools and a click on a survey frustum queue their commands
+    /// in `commands`, applied before the next frame like a panel's. The returned commands are what
+    /// this frame was drawn with (the camera's move, leaving a snapped view, the viewport's size
+    /// and frame statistics): the app applies them at once, so the state is what the picture
+    /// shows before anything else reads it, as when the viewport changed it directly.
+    pub fn ui(
+        &mut self,
+        ui: &mut egui::Ui,
+        state: &AppState,
+        commands: &mut Vec<Command>,
+    ) -> Vec<Command> {
         let full = ui.available_rect_before_wrap();
         let response = ui.allocate_rect(full, egui::Sense::click_and_drag());
         self.rect = Some(full);
-        let ppp = ui.ctx().pixels_per_point();
         let painter = ui.painter_at(full);
-        let bg = state.settings.background;
-        let bg32 = egui::Color32::from_rgb(
-            (bg[0] * 255.0) as u8,
-            (bg[1] * 255.0) as u8,
-            (bg[2] * 255.0) as u8,
+        painter.rect_filled(full, 0.0, background_colour(state.settings.background));
+
+        let mut drawn_with = Vec::new();
+        let tool_chosen = self.tools.tool.is_some();
+        let (view, input) = navigate(
+            ui,
+            &response,
+            full.height(),
+            tool_chosen,
+            state,
+            &mut drawn_with,
         );
-        painter.rect_filled(full, 0.0, bg32);
-
-        let mut input = camera_input(ui, &response, full.height());
-        if self.tools.tool.is_some() && response.dragged_by(egui::PointerButton::Primary) {
-            // The primary button draws the selection (Shift and Ctrl pick its set operation).
-            input.rotate = Vec2::ZERO;
-            input.pan = Vec2::ZERO;
-        }
-        if state.settings.turntable && state.snap.is_none() && input.rotate == Vec2::ZERO {
-            // 0.35 rad/s about the up axis, expressed as the drag that would do it.
-            input.rotate.x = -0.35 * input.dt / state.camera.rotate_speed;
-        }
-        if state.snap.is_some() && input.is_active() {
-            // Navigating leaves the survey camera, continuing from its pose.
-            if let Some(snap) = &state.snap {
-                state.camera.snap_to(&snap.camera);
-            }
-            state.snap = None;
-        }
-        if state.snap.is_none() {
-            state.camera.update(&input);
-        } else {
-            input = CameraInput::default();
-        }
-
-        // Where the render goes: the whole viewport, or the snapped camera's aspect (and only
-        // the right half side by side).
-        let snap_aspect = state.snap.as_ref().map(|s| {
-            let k = s.camera.intrinsics;
-            (k.width as f32, k.height as f32)
+        let plan = self.plan(full, &view, state);
+        let moving = input.is_active() || view.camera.is_moving();
+        let scale = self.render_scale(ui, state, &plan, moving);
+        let render_rect = plan.render_rect;
+        let (pixels, [rw, rh]) = render_sizes(render_rect, ui.ctx().pixels_per_point(), scale);
+        let camera = view.camera_at(rw, rh);
+        drawn_with.push(Command::RecordViewportFrame {
+            pixels,
+            stats: FrameStats {
+                frame_ms: self.resolution.frame_ms(),
+                render_scale: scale,
+                render_size: [rw, rh],
+            },
         });
-        let compare = state.settings.compare_mode;
+
+        self.rendered_last_frame = self.draw_models(ui, &painter, &plan, &camera, &view, state);
+        if let Some(e) = self.splat_view.error() {
+            painter.text(
+                full.left_bottom() + egui::vec2(8.0, -8.0),
+                egui::Align2::LEFT_BOTTOM,
+                e,
+                egui::FontId::proportional(12.0),
+                ui.visuals().error_fg_color,
+            );
+        }
+
+        // Overlays are drawn with the camera at the render rectangle's point size.
+        let overlay_camera = view.camera_at(
+            render_rect.width().max(1.0) as u32,
+            render_rect.height().max(1.0) as u32,
+        );
+        draw_overlays(&painter, &plan, &overlay_camera, &view, state);
+        let tool_used = self.use_tools(
+            ui,
+            &painter,
+            &response,
+            render_rect,
+            &overlay_camera,
+            commands,
+        );
+        if !tool_used {
+            snap_on_frustum_click(
+                &response,
+                render_rect,
+                &overlay_camera,
+                &view,
+                state,
+                commands,
+            );
+        }
+
+        if let (Some(photo_rect), Some(snap)) = (plan.photo_rect, view.snap) {
+            self.draw_photo(ui, &painter, render_rect, photo_rect, snap, state);
+        }
+        self.request_repaint(ui.ctx(), moving);
+        drawn_with
+    }
+
+    /// Lays this frame out: the render and photo rectangles, the compared survey (not while
+    /// looking through a survey camera) and the renderer.
+    fn plan(&self, full: egui::Rect, view: &FrameView, state: &AppState) -> FramePlan {
         // A second survey beside the one shown (not while looking through a survey camera).
         let compared = state
             .timeline
             .as_ref()
-            .filter(|_| state.snap.is_none())
+            .filter(|_| view.snap.is_none())
             .and_then(|t| t.compared());
         let side_by_side = state.settings.survey_layout == SurveyLayout::SideBySide;
-        let (render_rect, photo_rect) = match snap_aspect {
-            Some((w, h)) if compare == CompareMode::SideBySide => {
-                let (left, right) = full.split_left_right_at_fraction(0.5);
-                (fit_aspect(right, w, h), Some(fit_aspect(left, w, h)))
-            }
-            Some((w, h)) => {
-                let r = fit_aspect(full, w, h);
-                (r, Some(r))
-            }
-            None if compared.is_some() && side_by_side => {
-                (full.split_left_right_at_fraction(0.5).1, None)
-            }
-            None => (full, None),
-        };
-
-        let frame_ms = ui.input(|i| i.unstable_dt) * 1000.0;
-        let moving = input.is_active() || state.camera.is_moving();
-        let use_cpu = self.uses_cpu_renderer(state.settings.viewport_renderer);
-        let pictures = if compared.is_some() { 2 } else { 1 };
-        if use_cpu {
-            for view in self.cpu_views.iter_mut().take(pictures) {
-                if view.is_none() {
-                    *view = Some(CpuView::start(ui.ctx()));
-                }
-            }
+        let (render_rect, photo_rect) = picture_rects(
+            full,
+            view.snap,
+            state.settings.compare_mode,
+            compared.is_some() && side_by_side,
+        );
+        FramePlan {
+            full,
+            render_rect,
+            photo_rect,
+            compared,
+            side_by_side,
+            use_cpu: self.uses_cpu_renderer(state.settings.viewport_renderer),
         }
-        // The CPU workers' pictures arrive between frames and carry their own render time: the
-        // UI frames around them say nothing about what a render costs.
-        let received: Option<f32> = if use_cpu {
-            self.cpu_views
-                .iter_mut()
-                .take(pictures)
-                .filter_map(|v| match v {
-                    Some(Ok(view)) => view.receive(ui.ctx()),
-                    _ => None,
-                })
-                .reduce(f32::max)
+    }
+
+    /// The render scale of this frame (1 unless the resolution adapts to the frame-time budget),
+    /// from the time of the last render; records the frame in the frame log.
+    fn render_scale(
+        &mut self,
+        ui: &egui::Ui,
+        state: &AppState,
+        plan: &FramePlan,
+        moving: bool,
+    ) -> f32 {
+        let frame_ms = ui.input(|i| i.unstable_dt) * 1000.0;
+        let pictures = if plan.compared.is_some() { 2 } else { 1 };
+        let received = if plan.use_cpu {
+            self.receive_cpu_pictures(ui.ctx(), pictures)
         } else {
             None
         };
         let (sample_ms, sample_rendered) = match received {
             Some(render_ms) => (render_ms, true),
-            None if use_cpu => (frame_ms, false),
+            None if plan.use_cpu => (frame_ms, false),
             None => (frame_ms, self.rendered_last_frame),
         };
         // While training streams new models, every snapshot is a render: keep those within
@@ -259,112 +324,52 @@ impl Viewport {
         } else {
             1.0
         };
-        let px_w = (render_rect.width() * ppp).round().max(1.0) as u32;
-        let px_h = (render_rect.height() * ppp).round().max(1.0) as u32;
-        state.viewport_pixels = [px_w, px_h];
-        let (rw, rh) = scaled_size(px_w, px_h, scale);
-        let camera = state.view_camera(rw, rh);
         self.frame_log
             .record(ui.ctx(), frame_ms, scale, self.rendered_last_frame);
-        if sample_rendered && use_cpu {
+        if sample_rendered && plan.use_cpu {
             self.frame_log.record_render(sample_ms);
         }
-        state.frame_stats = FrameStats {
-            frame_ms: self.resolution.frame_ms(),
-            render_scale: scale,
-            render_size: [rw, rh],
-        };
+        scale
+    }
 
-        self.rendered_last_frame = false;
-        if let Some(splats) = &state.splats {
-            let layer = match &state.timeline {
-                Some(t) => t.layer(&state.settings.damage, t.current),
-                None => state.settings.damage.clone(),
-            };
-            let shown = Picture {
-                splats,
-                generation: state.splats_generation,
-                layer: &layer,
-            };
-            self.rendered_last_frame = self.draw_picture(
-                &painter,
-                0,
-                render_rect,
-                render_rect,
-                &camera,
-                &shown,
-                state,
-                use_cpu,
-            );
-            if let (Some((index, other)), Some(t)) = (&compared, &state.timeline) {
-                let layer = t.layer(&state.settings.damage, *index);
-                let other = Picture {
-                    splats: other,
-                    generation: t.compare_generation,
-                    layer: &layer,
-                };
-                let (rect, clip) = if side_by_side {
-                    let left = full.split_left_right_at_fraction(0.5).0;
-                    (left, left)
-                } else {
-                    let x = full.min.x + self.survey_swipe() * full.width();
-                    (
-                        full,
-                        egui::Rect::from_min_max(full.min, egui::pos2(x, full.max.y)),
-                    )
-                };
-                self.rendered_last_frame |=
-                    self.draw_picture(&painter, 1, rect, clip, &camera, &other, state, use_cpu);
-                self.draw_survey_labels(ui, &painter, full, render_rect, *index, state);
+    /// Starts the CPU workers of the first `pictures` slots (once) and takes the pictures they
+    /// finished. Returns the slowest of their render times: the pictures arrive between frames
+    /// and carry their own render time, where the UI frames around them say nothing about what a
+    /// render costs.
+    fn receive_cpu_pictures(&mut self, ctx: &egui::Context, pictures: usize) -> Option<f32> {
+        for view in self.cpu_views.iter_mut().take(pictures) {
+            if view.is_none() {
+                *view = Some(CpuView::start(ctx));
             }
-        } else if state.snap.is_none() {
-            painter.text(
-                full.center(),
-                egui::Align2::CENTER_CENTER,
-                if state.timeline.is_some() {
-                    "this survey has no model yet: Update twin makes it from the one before"
-                } else if state.scene.is_some() {
-                    "waiting for the first model…"
-                } else {
-                    "Open a dataset or drop a folder here"
-                },
-                egui::FontId::proportional(16.0),
-                egui::Color32::GRAY,
-            );
         }
-        if let Some(e) = self.splat_view.error() {
-            painter.text(
-                full.left_bottom() + egui::vec2(8.0, -8.0),
-                egui::Align2::LEFT_BOTTOM,
-                e,
-                egui::FontId::proportional(12.0),
-                ui.visuals().error_fg_color,
-            );
-        }
+        self.cpu_views
+            .iter_mut()
+            .take(pictures)
+            .filter_map(|v| match v {
+                Some(Ok(view)) => view.receive(ctx),
+                _ => None,
+            })
+            .reduce(f32::max)
+    }
 
-        // Overlays are drawn with the camera at the render rectangle's point size.
-        let overlay_camera = state.view_camera(
-            render_rect.width().max(1.0) as u32,
-            render_rect.height().max(1.0) as u32,
-        );
-        self.draw_overlays(
-            &painter.with_clip_rect(render_rect),
-            render_rect,
-            &overlay_camera,
-            state,
-        );
-        if compared.is_some() && side_by_side {
-            // The compared survey's picture has the same camera, grid and frusta.
-            let left = full.split_left_right_at_fraction(0.5).0;
-            self.draw_overlays(&painter.with_clip_rect(left), left, &overlay_camera, state);
-        }
-        self.tools.keys(ui.ctx(), &overlay_camera, commands);
+    /// Lets the selection tool read keys and the pointer (its commands go to `commands`), then
+    /// draws its shape and names it. Returns true when the pointer was the tool's this frame.
+    fn use_tools(
+        &mut self,
+        ui: &egui::Ui,
+        painter: &egui::Painter,
+        response: &egui::Response,
+        render_rect: egui::Rect,
+        camera: &Camera,
+        commands: &mut Vec<Command>,
+    ) -> bool {
+        self.tools.keys(ui.ctx(), camera, commands);
         let op = ui.input(|i| SetOp::from_modifiers(i.modifiers.shift, i.modifiers.command));
-        let tool_used =
-            self.tools
-                .pointer(&response, render_rect.min, &overlay_camera, op, commands);
+        let tool_used = self
+            .tools
+            .pointer(response, render_rect.min, camera, op, commands);
         self.tools
-            .draw(&painter, render_rect.min, response.hover_pos());
+            .draw(painter, render_rect.min, response.hover_pos());
         if let Some(tool) = self.tools.tool {
             painter.text(
                 render_rect.left_top() + egui::vec2(8.0, 8.0),
@@ -374,113 +379,18 @@ impl Viewport {
                 egui::Color32::from_rgb(255, 140, 0),
             );
         }
-
-        if !tool_used
-            && response.clicked()
-            && let Some(pos) = response.interact_pointer_pos()
-            && state.settings.show_frusta
-            && let Some(scene) = &state.scene
-        {
-            let cameras = state.survey_cameras();
-            let click = Vec2::new(pos.x - render_rect.min.x, pos.y - render_rect.min.y);
-            let depth = scene.frame.camera_distance * 0.08;
-            if let Some(i) = overlay::pick_frustum(
-                &overlay_camera,
-                &cameras,
-                depth,
-                overlay::near_plane(&scene.frame),
-                click,
-                10.0,
-            ) && state.snap.as_ref().is_none_or(|s| s.view != i)
-            {
-                commands.push(Command::SnapToView(i));
-            }
-        }
-
-        if let Some(photo_rect) = photo_rect {
-            self.draw_photo(ui, &painter, render_rect, photo_rect, state);
-        }
-
-        // Training snapshots repaint through the app's polling; only motion repaints at once.
-        // A resting view asks for one more frame after the settle time to come back to full
-        // resolution, not for a stream of frames (on a software driver each one costs the
-        // trainer CPU time).
-        if moving {
-            ui.ctx().request_repaint();
-        } else if self.resolution.settling() {
-            ui.ctx()
-                .request_repaint_after(std::time::Duration::from_millis(100));
-        }
+        tool_used
     }
 
-    fn draw_overlays(
-        &self,
-        painter: &egui::Painter,
-        rect: egui::Rect,
-        camera: &Camera,
-        state: &AppState,
-    ) {
-        let Some(scene) = &state.scene else {
-            return;
-        };
-        let mut segments = Vec::new();
-        if state.settings.show_grid {
-            segments.extend(overlay::grid(&scene.frame, 10));
-        }
-        if state.settings.show_frusta {
-            let selected = state.snap.as_ref().map(|s| s.view);
-            let cameras = state.survey_cameras();
-            segments.extend(overlay::frusta(
-                &cameras,
-                scene.frame.camera_distance * 0.08,
-                selected,
-            ));
-        }
-        let near = overlay::near_plane(&scene.frame);
-        for seg in &segments {
-            let Some((a, b)) = overlay::project_segment(camera, seg, near) else {
-                continue;
-            };
-            let stroke = match seg.kind {
-                SegmentKind::Grid => egui::Stroke::new(1.0, egui::Color32::from_gray(70)),
-                SegmentKind::GridAxis => egui::Stroke::new(1.5, egui::Color32::from_gray(110)),
-                SegmentKind::Frustum => {
-                    egui::Stroke::new(1.0, egui::Color32::from_rgb(80, 170, 255))
-                }
-                SegmentKind::FrustumSelected => {
-                    egui::Stroke::new(2.0, egui::Color32::from_rgb(255, 200, 40))
-                }
-            };
-            painter.line_segment(
-                [
-                    rect.min + egui::vec2(a.x, a.y),
-                    rect.min + egui::vec2(b.x, b.y),
-                ],
-                stroke,
-            );
-        }
-        // The distance measurement: its points, the line between them and the distance.
-        let colour = egui::Color32::from_rgb(255, 230, 0);
-        let on_screen: Vec<egui::Pos2> = state
-            .distance
-            .iter()
-            .filter_map(|&p| camera.project(p))
-            .map(|p| rect.min + egui::vec2(p.x, p.y))
-            .collect();
-        for &p in &on_screen {
-            painter.circle_filled(p, 4.0, colour);
-        }
-        if let [a, b] = on_screen.as_slice() {
-            painter.line_segment([*a, *b], egui::Stroke::new(2.0, colour));
-            if let Some(text) = state.distance_text() {
-                painter.text(
-                    *b + egui::vec2(8.0, -8.0),
-                    egui::Align2::LEFT_BOTTOM,
-                    text,
-                    egui::FontId::proportional(14.0),
-                    colour,
-                );
-            }
+    /// Training snapshots repaint through the app's polling; only motion repaints at once. A
+    /// resting view asks for one more frame after the settle time to come back to full
+    /// resolution, not for a stream of frames (on a software driver each one costs the trainer
+    /// CPU time).
+    fn request_repaint(&self, ctx: &egui::Context, moving: bool) {
+        if moving {
+            ctx.request_repaint();
+        } else if self.resolution.settling() {
+            ctx.request_repaint_after(std::time::Duration::from_millis(100));
         }
     }
 }

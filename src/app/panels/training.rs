@@ -5,7 +5,7 @@ use crate::app::commands::Command;
 use crate::app::panels::edit_settings;
 use crate::app::settings::TrainMode;
 use crate::app::state::AppState;
-use crate::app::training::RunStatus;
+use crate::app::training::{RunStatus, TrainingSession};
 
 #[derive(Default)]
 pub struct TrainingPanel;
@@ -86,31 +86,7 @@ impl TrainingPanel {
             });
         });
 
-        ui.horizontal(|ui| {
-            match session.map(|s| &s.status) {
-                Some(RunStatus::Running) | Some(RunStatus::Preparing) => {
-                    if ui.button("Pause").clicked() {
-                        commands.push(Command::PauseTraining);
-                    }
-                }
-                Some(RunStatus::Paused) => {
-                    if ui.button("Resume").clicked() {
-                        commands.push(Command::ResumeTraining);
-                    }
-                }
-                _ => {
-                    if ui
-                        .add_enabled(can_train, egui::Button::new("Train"))
-                        .clicked()
-                    {
-                        commands.push(Command::StartTraining);
-                    }
-                }
-            }
-            if ui.add_enabled(running, egui::Button::new("Stop")).clicked() {
-                commands.push(Command::StopTraining);
-            }
-        });
+        run_buttons(ui, session, running, can_train, commands);
 
         let Some(session) = session else {
             if !can_train {
@@ -118,49 +94,88 @@ impl TrainingPanel {
             }
             return;
         };
-        let (text, eta) = match (&session.status, &session.progress) {
-            (RunStatus::Preparing, _) => ("loading views…".to_string(), None),
-            (RunStatus::Failed(e), _) => (format!("failed: {e}"), None),
-            (
-                RunStatus::Finished {
-                    cancelled, seconds, ..
-                },
-                _,
-            ) => (
-                format!(
-                    "{} in {}",
-                    if *cancelled { "stopped" } else { "done" },
-                    format_duration(*seconds)
-                ),
-                None,
-            ),
-            (status, Some(p)) => (
-                format!(
-                    "{}{} / {}",
-                    if *status == RunStatus::Paused {
-                        "paused · "
-                    } else {
-                        ""
-                    },
-                    p.step,
-                    p.total
-                ),
-                Some(p.eta.as_secs_f64()),
-            ),
-            (_, None) => ("starting…".to_string(), None),
-        };
-        let text = match eta {
-            Some(eta) => format!("{text} · ETA {}", format_duration(eta)),
-            None => text,
-        };
         ui.add(
             egui::ProgressBar::new(session.fraction())
-                .text(text)
+                .text(progress_text(session))
                 // Only while preparing, when there is no progress to show: an animated bar
                 // repaints every frame, and on a software driver those frames took about a core
                 // from training.
                 .animate(session.status == RunStatus::Preparing),
         );
+    }
+}
+
+/// Train, or pause / resume the run, and stop it.
+fn run_buttons(
+    ui: &mut egui::Ui,
+    session: Option<&TrainingSession>,
+    running: bool,
+    can_train: bool,
+    commands: &mut Vec<Command>,
+) {
+    ui.horizontal(|ui| {
+        match session.map(|s| &s.status) {
+            Some(RunStatus::Running) | Some(RunStatus::Preparing) => {
+                if ui.button("Pause").clicked() {
+                    commands.push(Command::PauseTraining);
+                }
+            }
+            Some(RunStatus::Paused) => {
+                if ui.button("Resume").clicked() {
+                    commands.push(Command::ResumeTraining);
+                }
+            }
+            _ => {
+                if ui
+                    .add_enabled(can_train, egui::Button::new("Train"))
+                    .clicked()
+                {
+                    commands.push(Command::StartTraining);
+                }
+            }
+        }
+        if ui.add_enabled(running, egui::Button::new("Stop")).clicked() {
+            commands.push(Command::StopTraining);
+        }
+    });
+}
+
+/// The run's state and steps with the time left (`paused · 1200 / 7000 · ETA 1:05`).
+fn progress_text(session: &TrainingSession) -> String {
+    let (text, eta) = match (&session.status, &session.progress) {
+        (RunStatus::Preparing, _) => ("loading views…".to_string(), None),
+        (RunStatus::Failed(e), _) => (format!("failed: {e}"), None),
+        (
+            RunStatus::Finished {
+                cancelled, seconds, ..
+            },
+            _,
+        ) => (
+            format!(
+                "{} in {}",
+                if *cancelled { "stopped" } else { "done" },
+                format_duration(*seconds)
+            ),
+            None,
+        ),
+        (status, Some(p)) => (
+            format!(
+                "{}{} / {}",
+                if *status == RunStatus::Paused {
+                    "paused · "
+                } else {
+                    ""
+                },
+                p.step,
+                p.total
+            ),
+            Some(p.eta.as_secs_f64()),
+        ),
+        (_, None) => ("starting…".to_string(), None),
+    };
+    match eta {
+        Some(eta) => format!("{text} · ETA {}", format_duration(eta)),
+        None => text,
     }
 }
 

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use super::Viewport;
 use crate::app::cpu_view::color_image;
 use crate::app::settings::CompareMode;
-use crate::app::state::{AppState, Photo};
+use crate::app::state::{AppState, Photo, Snap};
 use crate::scene::RgbImage;
 
 fn photo_texture(ctx: &egui::Context, image: &RgbImage) -> egui::TextureHandle {
@@ -16,19 +16,17 @@ fn photo_texture(ctx: &egui::Context, image: &RgbImage) -> egui::TextureHandle {
 }
 
 impl Viewport {
-    /// The survey photo of the view snapped to, beside, over (blended) or swiped against the
-    /// render, with the view's name on the render.
+    /// The photo of `snap`'s view beside, over (blended) or swiped against the render, with the
+    /// view's name on the render.
     pub(super) fn draw_photo(
         &mut self,
         ui: &mut egui::Ui,
         painter: &egui::Painter,
         render_rect: egui::Rect,
         photo_rect: egui::Rect,
+        snap: &Snap,
         state: &AppState,
     ) {
-        let Some(snap) = &state.snap else {
-            return;
-        };
         let image = match &snap.photo {
             Photo::Loaded(image) => image.clone(),
             Photo::Loading => {
@@ -63,74 +61,87 @@ impl Viewport {
         let Some((_, _, texture)) = &self.photo else {
             return;
         };
+        let texture = texture.id();
         let full_uv = egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0));
         match state.settings.compare_mode {
             CompareMode::SideBySide => {
-                painter.image(texture.id(), photo_rect, full_uv, egui::Color32::WHITE);
+                painter.image(texture, photo_rect, full_uv, egui::Color32::WHITE);
             }
             CompareMode::Blend => {
                 let alpha = (state.settings.compare_blend * 255.0) as u8;
                 painter.image(
-                    texture.id(),
+                    texture,
                     photo_rect,
                     full_uv,
                     egui::Color32::from_white_alpha(alpha),
                 );
             }
-            CompareMode::Swipe => {
-                if self.swipe <= 0.0 || self.swipe > 1.0 {
-                    self.swipe = 0.5;
-                }
-                let x = photo_rect.min.x + self.swipe * photo_rect.width();
-                let left =
-                    egui::Rect::from_min_max(photo_rect.min, egui::pos2(x, photo_rect.max.y));
-                let uv =
-                    egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(self.swipe, 1.0));
-                painter.image(texture.id(), left, uv, egui::Color32::WHITE);
-                let handle = egui::Rect::from_center_size(
-                    egui::pos2(x, photo_rect.center().y),
-                    egui::vec2(12.0, photo_rect.height()),
-                );
-                let id = ui.scope_id().with("swipe-handle");
-                let r = ui.interact(handle, id, egui::Sense::drag());
-                if r.dragged() {
-                    self.swipe =
-                        (self.swipe + r.drag_delta().x / photo_rect.width()).clamp(0.01, 1.0);
-                }
-                painter.line_segment(
-                    [
-                        egui::pos2(x, photo_rect.min.y),
-                        egui::pos2(x, photo_rect.max.y),
-                    ],
-                    egui::Stroke::new(2.0, egui::Color32::WHITE),
-                );
-                painter.circle_filled(
-                    egui::pos2(x, photo_rect.center().y),
-                    6.0,
-                    egui::Color32::WHITE,
-                );
-            }
+            CompareMode::Swipe => self.draw_swiped_photo(ui, painter, texture, photo_rect),
         }
-        let name = state
-            .scene
-            .as_ref()
-            .and_then(|s| s.dataset.as_ref())
-            .and_then(|d| d.views.get(snap.view))
-            .map(|v| v.name.clone())
-            .unwrap_or_default();
-        painter.text(
-            render_rect.left_top() + egui::vec2(8.0, 8.0),
-            egui::Align2::LEFT_TOP,
-            format!(
-                "{name}: {} | render  (drag or scroll in the view to leave)",
-                if snap.change_map {
-                    "change map"
-                } else {
-                    "photo"
-                }
-            ),
-            egui::FontId::proportional(13.0),
+        draw_view_name(painter, render_rect, snap, state);
+    }
+
+    /// The photo's part left of the swipe handle over the render, and the handle, which can be
+    /// dragged.
+    fn draw_swiped_photo(
+        &mut self,
+        ui: &mut egui::Ui,
+        painter: &egui::Painter,
+        texture: egui::TextureId,
+        photo_rect: egui::Rect,
+    ) {
+        if self.swipe <= 0.0 || self.swipe > 1.0 {
+            self.swipe = 0.5;
+        }
+        let x = photo_rect.min.x + self.swipe * photo_rect.width();
+        let left = egui::Rect::from_min_max(photo_rect.min, egui::pos2(x, photo_rect.max.y));
+        let uv = egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(self.swipe, 1.0));
+        painter.image(texture, left, uv, egui::Color32::WHITE);
+        let handle = egui::Rect::from_center_size(
+            egui::pos2(x, photo_rect.center().y),
+            egui::vec2(12.0, photo_rect.height()),
+        );
+        let id = ui.scope_id().with("swipe-handle");
+        let r = ui.interact(handle, id, egui::Sense::drag());
+        if r.dragged() {
+            self.swipe = (self.swipe + r.drag_delta().x / photo_rect.width()).clamp(0.01, 1.0);
+        }
+        painter.line_segment(
+            [
+                egui::pos2(x, photo_rect.min.y),
+                egui::pos2(x, photo_rect.max.y),
+            ],
+            egui::Stroke::new(2.0, egui::Color32::WHITE),
+        );
+        painter.circle_filled(
+            egui::pos2(x, photo_rect.center().y),
+            6.0,
             egui::Color32::WHITE,
         );
     }
+}
+
+/// The snapped view's name and what its picture is (photo or change map), on the render.
+fn draw_view_name(painter: &egui::Painter, render_rect: egui::Rect, snap: &Snap, state: &AppState) {
+    let name = state
+        .scene
+        .as_ref()
+        .and_then(|s| s.dataset.as_ref())
+        .and_then(|d| d.views.get(snap.view))
+        .map(|v| v.name.clone())
+        .unwrap_or_default();
+    painter.text(
+        render_rect.left_top() + egui::vec2(8.0, 8.0),
+        egui::Align2::LEFT_TOP,
+        format!(
+            "{name}: {} | render  (drag or scroll in the view to leave)",
+            if snap.change_map {
+                "change map"
+            } else {
+                "photo"
+            }
+        ),
+        egui::FontId::proportional(13.0),
+        egui::Color32::WHITE,
+    );
 }

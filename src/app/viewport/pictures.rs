@@ -5,7 +5,8 @@
 
 use std::sync::Arc;
 
-use super::Viewport;
+use super::navigation::FrameView;
+use super::{FramePlan, Viewport};
 use crate::app::cpu_view::ViewRequest;
 use crate::app::state::AppState;
 use crate::damage::layer::DamageLayer;
@@ -21,6 +22,80 @@ pub(super) struct Picture<'a> {
 }
 
 impl Viewport {
+    /// Draws the model shown and, when a survey is compared, its model too (beside it or under
+    /// the swipe handle) with both surveys' names; without a model, says why. Returns true when
+    /// a GPU render was queued this frame.
+    pub(super) fn draw_models(
+        &mut self,
+        ui: &egui::Ui,
+        painter: &egui::Painter,
+        plan: &FramePlan,
+        camera: &Camera,
+        view: &FrameView,
+        state: &AppState,
+    ) -> bool {
+        let Some(splats) = &state.splats else {
+            if view.snap.is_none() {
+                painter.text(
+                    plan.full.center(),
+                    egui::Align2::CENTER_CENTER,
+                    if state.timeline.is_some() {
+                        "this survey has no model yet: Update twin makes it from the one before"
+                    } else if state.scene.is_some() {
+                        "waiting for the first model…"
+                    } else {
+                        "Open a dataset or drop a folder here"
+                    },
+                    egui::FontId::proportional(16.0),
+                    egui::Color32::GRAY,
+                );
+            }
+            return false;
+        };
+        let (full, render_rect) = (plan.full, plan.render_rect);
+        let layer = match &state.timeline {
+            Some(t) => t.layer(&state.settings.damage, t.current),
+            None => state.settings.damage.clone(),
+        };
+        let shown = Picture {
+            splats,
+            generation: state.splats_generation,
+            layer: &layer,
+        };
+        let mut rendered = self.draw_picture(
+            painter,
+            0,
+            render_rect,
+            render_rect,
+            camera,
+            &shown,
+            state,
+            plan.use_cpu,
+        );
+        if let (Some((index, other)), Some(t)) = (&plan.compared, &state.timeline) {
+            let layer = t.layer(&state.settings.damage, *index);
+            let other = Picture {
+                splats: other,
+                generation: t.compare_generation,
+                layer: &layer,
+            };
+            let (rect, clip) = if plan.side_by_side {
+                let left = full.split_left_right_at_fraction(0.5).0;
+                (left, left)
+            } else {
+                let x = full.min.x + self.survey_swipe() * full.width();
+                (
+                    full,
+                    egui::Rect::from_min_max(full.min, egui::pos2(x, full.max.y)),
+                )
+            };
+            rendered |=
+                self.draw_picture(painter, 1, rect, clip, camera, &other, state, plan.use_cpu);
+            self.draw_survey_labels(ui, painter, full, render_rect, *index, state);
+        }
+        rendered
+    }
+
     /// Draws `picture` rendered at `camera`'s size, stretched over `rect` and shown only inside
     /// `clip`, in renderer slot `slot`. Returns true when a GPU render was queued this frame.
     #[allow(clippy::too_many_arguments)]
