@@ -110,6 +110,7 @@ fn rendering_only_the_region_tiles_trains_the_same() {
                 },
                 labels: Vec::new(),
                 region: Some(region),
+                light: None,
             }
         })
         .collect();

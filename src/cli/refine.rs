@@ -11,13 +11,13 @@ use serde::Serialize;
 
 use damage_twin::damage::display::{DisplayStyle, render_png, save_png};
 use damage_twin::damage::evaluate::DamageReadout;
-use damage_twin::damage::hulls::HullConfig;
 use damage_twin::damage::refine::{RefineConfig, RefineOutcome, Strategy, refine_job};
 use damage_twin::damage::select::{SelectConfig, Validation};
 use damage_twin::damage::{DamageClass, Palette, TrainMode};
 use damage_twin::scene::atomic::write_atomic;
 use damage_twin::scene::run_folder::RunFolder;
 use damage_twin::scene::{Dataset, ImageScale, RgbImage};
+use damage_twin::train::focus::hulls::HullConfig;
 use damage_twin::train::job::JobOptions;
 
 use super::args::{

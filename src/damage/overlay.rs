@@ -315,6 +315,7 @@ mod tests {
                     },
                     labels,
                     region: None,
+                    light: None,
                 }
             })
             .collect();

@@ -5,20 +5,18 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
+use glam::Vec3;
 use serde::Serialize;
 
 use crate::damage::TrainMode;
 use crate::damage::evaluate::{DamageReadout, evaluate_damage};
 use crate::damage::reference::{load_reference_views, reference_source};
-use crate::damage::refine::{RefineConfig, ViewHulls, to_twin_look};
-use crate::damage::setup::apply_mode;
 use crate::raster::{RenderSettings, render};
-use crate::scene::Dataset;
 use crate::splats::Splats;
+use crate::train::focus::{Focus, ViewHulls};
 use crate::train::job::JobError;
-use crate::train::spec::{DensifyPolicy, TrainSpec};
+use crate::train::spec::{DensifyPolicy, TrainSpec, TrainView};
 use crate::train::trainer::Trainer;
-use crate::train::views::load_views;
 
 /// Damage and image quality on the held-out views at the refinement scale.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -32,20 +30,19 @@ pub struct Quality {
     pub psnr: Option<f64>,
 }
 
-/// Milliseconds per step of the same run on uncropped views (up to four of the trained ones).
+/// Milliseconds per step of the same run on uncropped views (up to four of the trained ones),
+/// made into targets by `targets` as the crops were.
 pub(super) fn full_step_ms(
-    dataset: &Dataset,
+    focus: &Focus,
     model: &Splats,
     spec: &TrainSpec,
     trained: &[&ViewHulls],
-    config: &RefineConfig,
+    targets: &(dyn Fn(&mut [TrainView]) + Sync),
     mode: TrainMode,
 ) -> Result<f64, JobError> {
     const STEPS: u32 = 8;
     let indices: Vec<usize> = trained.iter().take(4).map(|v| v.index).collect();
-    let mut views = load_views(dataset, &indices, config.scale, mode.uses_masks())?;
-    to_twin_look(&mut views, &indices, config);
-    apply_mode(&mut views, mode, &config.select.palette);
+    let views = focus.load(&indices, mode.uses_masks(), targets)?;
     let timing_spec = TrainSpec {
         iterations: STEPS,
         densify: DensifyPolicy::Off,
@@ -64,10 +61,10 @@ pub(super) fn full_step_ms(
 /// Damage figures against the reference masks and PSNR (whole and outside the hulls) on the
 /// held-out views at the refinement scale.
 pub(super) fn quality(
-    dataset: &Dataset,
+    focus: &Focus,
     splats: &Splats,
     heldout: &[&ViewHulls],
-    config: &RefineConfig,
+    background: Vec3,
     readout: &DamageReadout,
 ) -> Result<Quality, JobError> {
     let indices: Vec<usize> = heldout.iter().map(|v| v.index).collect();
@@ -75,16 +72,15 @@ pub(super) fn quality(
     if indices.is_empty() {
         return Ok(q);
     }
-    if let Some(source) = reference_source(dataset) {
-        let views = load_reference_views(dataset, &source, &indices, config.scale)?;
-        let figures = evaluate_damage(splats, &views, readout, config.background).figures();
+    if let Some(source) = reference_source(focus.dataset) {
+        let views = load_reference_views(focus.dataset, &source, &indices, focus.scale)?;
+        let figures = evaluate_damage(splats, &views, readout, background).figures();
         q.iou = figures.iou;
         q.precision = figures.precision;
         q.recall = figures.recall;
     }
-    let mut photos = load_views(dataset, &indices, config.scale, false)?;
-    to_twin_look(&mut photos, &indices, config);
-    let settings = RenderSettings::new(config.background, splats.sh_degree);
+    let photos = focus.load(&indices, false, &|_| {})?;
+    let settings = RenderSettings::new(background, splats.sh_degree);
     let (mut se_out, mut n_out, mut se_all, mut n_all) = (0.0f64, 0usize, 0.0f64, 0usize);
     for (photo, v) in photos.iter().zip(heldout) {
         let out = render(splats, &photo.camera, &settings);

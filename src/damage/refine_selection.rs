@@ -4,13 +4,13 @@
 
 use rayon::prelude::*;
 
-use super::refine::{RefineConfig, phase_progress};
 use crate::damage::DamageClass;
-use crate::damage::hulls::regions;
+use crate::damage::refine_config::RefineConfig;
 use crate::damage::select::{MaskView, Selection, select};
 use crate::scene::Dataset;
 use crate::splats::Splats;
-use crate::train::job::{JobContext, JobError};
+use crate::train::focus::hulls::{median_spacing, regions};
+use crate::train::job::{JobContext, JobError, Progress};
 
 /// A person's selection (indices into `model`, out-of-range ones dropped), each classed by its
 /// most probable label.
@@ -71,7 +71,9 @@ pub(super) fn select_by_masks(
         &mask_views,
         &config.select,
         config.background,
-        &mut |done, total| phase_progress(ctx, "select", done, total, n),
+        &mut |done, total| {
+            ctx.progress(Progress::counted("select", done, total, n));
+        },
     );
     Ok(selection)
 }
@@ -93,30 +95,4 @@ pub(super) fn region_labels(
         &selection.selected,
         config.region_spacings * spacing.max(1e-6),
     )
-}
-
-/// The median distance of the selected Gaussians to their nearest selected neighbour.
-fn median_spacing(model: &Splats, selected: &[u32]) -> f32 {
-    use kiddo::{ImmutableKdTree, SquaredEuclidean};
-    if selected.len() < 2 {
-        return 0.0;
-    }
-    let coords: Vec<[f32; 3]> = selected
-        .iter()
-        .map(|&g| model.means[g as usize].to_array())
-        .collect();
-    let tree: ImmutableKdTree<f32, 3> = ImmutableKdTree::new_from_slice(&coords);
-    let two = std::num::NonZeroUsize::new(2).unwrap_or(std::num::NonZeroUsize::MIN);
-    let mut d: Vec<f32> = coords
-        .iter()
-        .map(|c| {
-            tree.nearest_n::<SquaredEuclidean>(c, two)
-                .iter()
-                .map(|nb| nb.distance)
-                .fold(0.0f32, f32::max)
-                .sqrt()
-        })
-        .collect();
-    d.sort_by(f32::total_cmp);
-    d[d.len() / 2]
 }

@@ -15,12 +15,12 @@ use glam::{Quat, Vec3};
 use crate::damage::DamageClass;
 use crate::damage::evaluate::{DamageReadout, predicted_masks};
 use crate::raster::{RenderSettings, render};
-use crate::scene::project::ColourTransform;
 use crate::scene::{Dataset, ImageScale, Mask, SceneError};
 use crate::splats::Splats;
 use crate::splats::model::{SH_C0, logit};
 use crate::timeline::changes::{and_not, dilate, drop_slivers, drop_small, without_near_floaters};
 use crate::timeline::earlier::{EarlierSurvey, surface_depth, unproject};
+use crate::train::focus::ViewLights;
 
 /// How seeds are made.
 #[derive(Clone, Debug, PartialEq)]
@@ -78,7 +78,7 @@ struct SeedView {
 }
 
 /// Lifts the new damage of `dataset`'s views `train_idx` (at `scale`) onto the twin and appends
-/// a seed Gaussian per grid cell to `model`. `appearance` maps each view's photo into the twin's
+/// a seed Gaussian per grid cell to `model`. `lights` maps each view's photo into the twin's
 /// light (views without one are taken as they are).
 #[allow(clippy::too_many_arguments)]
 pub fn seed_new_damage(
@@ -88,7 +88,7 @@ pub fn seed_new_damage(
     scale: ImageScale,
     settings: &RenderSettings,
     readout: &DamageReadout,
-    appearance: &BTreeMap<usize, ColourTransform>,
+    lights: &ViewLights,
     config: &SeedConfig,
 ) -> Result<SeedReport, SceneError> {
     if model.label_channels < DamageClass::ALL.len() {
@@ -101,7 +101,7 @@ pub fn seed_new_damage(
         if loaded.masks.is_empty() {
             continue;
         }
-        if let Some(transform) = appearance.get(&index) {
+        if let Some(transform) = lights.get(&index) {
             transform.undo(&mut loaded.image);
         }
         let out = render(

@@ -4,7 +4,6 @@
 //! renders in the new-damage colour while old damage keeps its class colour; the earlier
 //! survey's model is read, never written.
 
-use std::collections::BTreeMap;
 use std::time::Instant;
 
 use serde::Serialize;
@@ -20,6 +19,7 @@ use crate::timeline::appearance::{fit_transform, unchanged_pixels};
 use crate::timeline::changes::without_near_floaters;
 use crate::timeline::seed::{SeedConfig, SeedReport, seed_new_damage};
 use crate::timeline::twin::{TimelineError, Twin};
+use crate::train::focus::{ViewLights, trained_or_created};
 use crate::train::history::{EvalSample, History};
 use crate::train::job::{Job, JobContext, JobError, JobOptions};
 use crate::train::views::split_views;
@@ -246,11 +246,13 @@ pub fn update(
 
     let mut refine_config = config.refine.clone();
     refine_config.select.lift_unlabelled = true;
+    // Each photo's light relative to the twin's rides on its training view.
+    let mut lights = ViewLights::new();
     let mut appearance = None;
     if config.appearance {
         ctx.log("fitting each photo's light against the twin");
         let (fits, pooled) = fit_appearance(&model, &dataset, &refine_config, &readout)?;
-        refine_config.appearance = fits;
+        lights = fits;
         appearance = Some(pooled);
     }
     // The twin with its new-damage seeds, when seeding is on; the twin itself otherwise.
@@ -268,7 +270,7 @@ pub fn update(
                 refine_config.scale,
                 &settings,
                 &readout,
-                &refine_config.appearance,
+                &lights,
                 seed_config,
             )?;
             ctx.log(format!("new-damage seeds: {:?}", report.seeds));
@@ -277,21 +279,19 @@ pub fn update(
         None => None,
     };
     let seeded = seeded.as_ref().unwrap_or(&model);
-    let outcome = refine_from(ctx, &dataset, &model, seeded, &refine_config)?;
+    let outcome = refine_from(ctx, &dataset, &lights, &model, seeded, &refine_config)?;
     let mut splats = (*outcome.splats).clone();
     // History: what the update trained or created changed in this survey (the seeds count as
     // created); damage nobody saw before is this survey's.
     let survey = index as u16;
-    let first_new = model.meta.next_id();
-    let trained: std::collections::HashSet<u64> = outcome
-        .selection
-        .selected
-        .iter()
-        .map(|&g| seeded.meta.ids[g as usize])
-        .collect();
-    for g in 0..splats.len() {
-        let id = splats.meta.ids[g];
-        if id >= first_new || trained.contains(&id) {
+    let changed = trained_or_created(
+        &splats,
+        seeded,
+        &outcome.selection.selected,
+        model.meta.next_id(),
+    );
+    for (g, changed) in changed.into_iter().enumerate() {
+        if changed {
             splats.meta.survey[g] = survey;
         }
     }
@@ -332,9 +332,9 @@ fn fit_appearance(
     dataset: &Dataset,
     config: &RefineConfig,
     readout: &DamageReadout,
-) -> Result<(BTreeMap<usize, ColourTransform>, ColourTransform), JobError> {
+) -> Result<(ViewLights, ColourTransform), JobError> {
     let settings = RenderSettings::new(config.background, model.sh_degree);
-    let mut fits = BTreeMap::new();
+    let mut fits = ViewLights::new();
     let (mut all_render, mut all_photo) = (Vec::new(), Vec::new());
     for index in 0..dataset.views.len() {
         let loaded = dataset.load_view(index, config.scale)?;

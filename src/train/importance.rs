@@ -95,6 +95,7 @@ mod tests {
             },
             labels: Vec::new(),
             region: None,
+            light: None,
         }
     }
 

@@ -35,6 +35,23 @@ pub struct Progress {
     pub eta: Duration,
 }
 
+impl Progress {
+    /// Step `step` of `total` of a phase that neither trains nor times itself (selecting,
+    /// drawing hulls), over `gaussians` Gaussians.
+    pub fn counted(phase: &'static str, step: usize, total: usize, gaussians: usize) -> Progress {
+        Progress {
+            phase,
+            step: step as u32,
+            total: total as u32,
+            loss: f32::NAN,
+            psnr: None,
+            gaussians,
+            elapsed: Duration::ZERO,
+            eta: Duration::ZERO,
+        }
+    }
+}
+
 /// Why a job failed.
 #[derive(Debug, thiserror::Error)]
 pub enum JobError {

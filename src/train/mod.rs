@@ -7,6 +7,7 @@ pub mod appearance;
 pub mod backend_choice;
 pub mod densify;
 pub mod evaluate;
+pub mod focus;
 pub mod guards;
 pub mod history;
 pub mod importance;

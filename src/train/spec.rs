@@ -5,6 +5,7 @@
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+use crate::scene::project::ColourTransform;
 use crate::scene::{Camera, Mask, RgbImage};
 use crate::train::adam::{GroupFlags, LearningRates, ParamGroup};
 use crate::train::densify::DensifyConfig;
@@ -294,4 +295,19 @@ pub struct TrainView {
     pub labels: Vec<Mask>,
     /// Pixels outside the region (0) do not contribute to any loss.
     pub region: Option<Mask>,
+    /// The light `image` was photographed in relative to the model's, when it is another
+    /// survey's (`photo = M · colour + o`, fitted by `timeline::appearance`). The trainer fits
+    /// `image` as it is, so a focused run maps such a photo into the model's light first
+    /// (`to_model_light`): a later survey's light must not repaint the model. None: the model's
+    /// own light.
+    pub light: Option<ColourTransform>,
+}
+
+impl TrainView {
+    /// Maps the photo into the model's light (undoing `light`, which is then None).
+    pub fn to_model_light(&mut self) {
+        if let Some(light) = self.light.take() {
+            light.undo(&mut self.image);
+        }
+    }
 }

@@ -101,6 +101,7 @@ pub fn load_views(
                 labels: label_masks,
                 // Ignored pixels (ignore masks: pedestrians, cars, sky) take no part in any loss.
                 region: loaded.ignore,
+                light: None,
             })
         })
         .collect()

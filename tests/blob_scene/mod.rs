@@ -58,6 +58,7 @@ pub fn view(truth: &Splats, name: &str, camera: Camera) -> TrainView {
         },
         labels: Vec::new(),
         region: None,
+        light: None,
     }
 }
 

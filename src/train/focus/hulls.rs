@@ -1,8 +1,9 @@
-//! Hull masks (the paper's §2.3): in each view, the convex hull of the selected Gaussians' 2D
+//! Hull masks (the paper's §2.3): in each view, the convex hull of a set of Gaussians' 2D
 //! footprints (their projected 3σ ellipses, not only their centres), dilated by a few pixels.
-//! One hull per view as the paper draws it, or one per connected damage region, which leaves
-//! out the undamaged wall between two distant cracks. A refinement renders and trains only
-//! inside these; views whose hulls are all empty or tiny are dropped.
+//! One hull per view as the paper draws it, or one per connected region of the set, which
+//! leaves out the untouched surface between two distant pieces (two cracks). A focused run
+//! renders and trains only inside these; views whose hulls are all empty or tiny are dropped.
+//! Pure geometry: what the set is (damage, a block) is the caller's.
 
 use glam::Vec2;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
@@ -19,7 +20,7 @@ const ELLIPSE_SAMPLES: usize = 12;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HullConfig {
     /// Dilation in pixels (a disc): the margin that keeps the loss's SSIM window and the
-    /// blurred edge of the damage inside.
+    /// blurred edge of what is trained inside.
     pub dilate_px: f32,
     /// Hulls covering fewer pixels than this are dropped.
     pub min_area_px: usize,
@@ -45,7 +46,7 @@ pub struct Hull {
     pub x0: u32,
     pub y0: u32,
     pub mask: Mask,
-    /// The damage region it covers (0 when hulls are per view).
+    /// The region of the set it covers (0 when hulls are per view).
     pub region: u32,
 }
 
@@ -229,7 +230,7 @@ pub fn rasterize_hull(
     (area >= min_area.max(1)).then_some((x0, y0, mask))
 }
 
-/// Connected damage regions: Gaussians `selected` whose centres chain within `radius` share a
+/// Connected regions: Gaussians `selected` whose centres chain within `radius` share a
 /// region. Returns per selected Gaussian (same order) its region id, counting from 0.
 pub fn regions(splats: &Splats, selected: &[u32], radius: f32) -> Vec<u32> {
     let n = selected.len();
@@ -264,6 +265,32 @@ pub fn regions(splats: &Splats, selected: &[u32], radius: f32) -> Vec<u32> {
             *ids.entry(root).or_insert(next)
         })
         .collect()
+}
+
+/// The median distance of the `selected` Gaussians to their nearest selected neighbour: the
+/// set's own density, the unit region radii are given in.
+pub fn median_spacing(splats: &Splats, selected: &[u32]) -> f32 {
+    if selected.len() < 2 {
+        return 0.0;
+    }
+    let coords: Vec<[f32; 3]> = selected
+        .iter()
+        .map(|&g| splats.means[g as usize].to_array())
+        .collect();
+    let tree: ImmutableKdTree<f32, 3> = ImmutableKdTree::new_from_slice(&coords);
+    let two = std::num::NonZeroUsize::new(2).unwrap_or(std::num::NonZeroUsize::MIN);
+    let mut d: Vec<f32> = coords
+        .iter()
+        .map(|c| {
+            tree.nearest_n::<SquaredEuclidean>(c, two)
+                .iter()
+                .map(|nb| nb.distance)
+                .fold(0.0f32, f32::max)
+                .sqrt()
+        })
+        .collect();
+    d.sort_by(f32::total_cmp);
+    d[d.len() / 2]
 }
 
 /// The hulls of one view: the footprints of the selected Gaussians that are visible in it

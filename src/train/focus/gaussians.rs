@@ -1,0 +1,93 @@
+//! Which Gaussians a focused run trains and how: the spec of a run on a trained model with only
+//! those Gaussians free, fine-tuned as they are or densified; and, in its result, the Gaussians
+//! it trained or created, found again by id (densification reorders and adds Gaussians).
+
+use std::collections::HashSet;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::splats::Splats;
+use crate::train::densify::DensifyConfig;
+use crate::train::spec::{DensifyPolicy, TrainSpec, densify_for_iterations};
+
+/// Fine-tune the trained Gaussians as they are, or let them densify (clone, split, prune) as they
+/// train.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Strategy {
+    /// Position, colour, opacity, scale, rotation and labels of the selection; count unchanged.
+    Finetune,
+    /// The same plus density control restricted to the selection; new Gaussians are trainable
+    /// and inherit their parent's damage labels and state.
+    Retrain,
+}
+
+impl std::str::FromStr for Strategy {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        match text {
+            "finetune" => Ok(Strategy::Finetune),
+            "retrain" => Ok(Strategy::Retrain),
+            _ => Err(format!(
+                "unknown strategy {text:?}: use finetune or retrain"
+            )),
+        }
+    }
+}
+
+/// The spec of a focused run of `iterations` steps (at least one) on the trained `model`, in
+/// which only the Gaussians `trainable` (indices into `model`) change.
+pub fn focused_spec(
+    model: &Splats,
+    trainable: &[u32],
+    strategy: Strategy,
+    iterations: u32,
+    seed: u64,
+    background: Vec3,
+) -> TrainSpec {
+    let iterations = iterations.max(1);
+    let mut spec = TrainSpec::reconstruction(iterations);
+    spec.sh_degree = model.sh_degree;
+    // The model is trained: every SH band is rendered from the first step.
+    spec.sh_ramp_every = 0;
+    spec.seed = seed;
+    spec.background = background;
+    spec.eval_every = 0;
+    spec.densify = match strategy {
+        Strategy::Finetune => DensifyPolicy::Off,
+        // No opacity reset: in a short local run it would blank the trained Gaussians mid-way,
+        // and the frozen rest of the model keeps floaters out anyway.
+        Strategy::Retrain => DensifyPolicy::Adaptive(DensifyConfig {
+            opacity_reset_every: 0,
+            ..densify_for_iterations(iterations, seed)
+        }),
+    };
+    let mut free = vec![false; model.len()];
+    for &g in trainable {
+        free[g as usize] = true;
+    }
+    spec.trainable = Some(free);
+    spec
+}
+
+/// Per Gaussian of a focused run's `result`, whether the run trained it (its id is that of one of
+/// `input`'s Gaussians `trained`) or created it (an id from `first_new_id` on).
+pub fn trained_or_created(
+    result: &Splats,
+    input: &Splats,
+    trained: &[u32],
+    first_new_id: u64,
+) -> Vec<bool> {
+    let trained: HashSet<u64> = trained
+        .iter()
+        .map(|&g| input.meta.ids[g as usize])
+        .collect();
+    result
+        .meta
+        .ids
+        .iter()
+        .map(|id| *id >= first_new_id || trained.contains(id))
+        .collect()
+}
