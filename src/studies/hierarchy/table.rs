@@ -89,3 +89,23 @@ pub fn hierarchy_table(rows: &[HierarchyRow]) -> String {
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(serde::Deserialize)]
+    struct Study {
+        rows: Vec<HierarchyRow>,
+    }
+
+    #[test]
+    fn the_csv_of_the_saved_study_is_the_one_in_docs() {
+        let json = include_str!("../../../docs/figures/hierarchy-study.json");
+        let study: Study = serde_json::from_str(json).expect("the study in docs/ parses");
+        let csv = include_str!("../../../docs/figures/hierarchy-study.csv");
+        assert_eq!(hierarchy_csv(&study.rows), csv);
+        let table = hierarchy_table(&study.rows);
+        assert_eq!(table.lines().count(), study.rows.len() + 2);
+    }
+}
