@@ -2,7 +2,7 @@
 //!
 //! Modules follow the pipeline (see docs/ARCHITECTURE.md): `scene` reads and writes inputs,
 //! `splats` is the model, `raster` renders and differentiates it on the CPU, `gpu` does the same
-//! in WGSL, `train` optimises, `damage`/`timeline` use the engine, `synth` makes the demo building.
+//! in WGSL, `train` optimises, `damage`/`timeline` use the engine, `studies` measure it, `synth` makes the demo building.
 
 #[cfg(feature = "app")]
 pub mod app;
@@ -14,6 +14,7 @@ pub mod report;
 pub mod scene;
 pub mod simd;
 pub mod splats;
+pub mod studies;
 pub mod synth;
 pub mod timeline;
 pub mod train;

@@ -9,12 +9,12 @@ use std::sync::OnceLock;
 use damage_twin::damage::evaluate::{DamageReadout, evaluate_damage};
 use damage_twin::damage::reference::{load_reference_views, reference_source};
 use damage_twin::damage::setup::{RunConfig, prepare_run};
-use damage_twin::damage::study::{NoiseModel, StudyConfig, StudyStage, run_study};
 use damage_twin::damage::{DamageClass, Palette, TrainMode};
 use damage_twin::metrics::MaskAgreement;
 use damage_twin::scene::open::OpenOptions;
 use damage_twin::scene::{Dataset, ImageScale};
 use damage_twin::splats::Splats;
+use damage_twin::studies::mask_noise::{NoiseModel, StudyConfig, StudyStage, run_study};
 use damage_twin::synth::params::SynthParams;
 use damage_twin::train::job::JobOptions;
 use damage_twin::train::run::train;
@@ -214,7 +214,7 @@ fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks
     };
     let mut finished = 0;
     let rows = run_study(survey(), &study, &mut |event| {
-        if let damage_twin::damage::study::StudyEvent::RunFinished { .. } = event {
+        if let damage_twin::studies::mask_noise::StudyEvent::RunFinished { .. } = event {
             finished += 1;
         }
     })
@@ -266,7 +266,7 @@ fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks
     };
     let mut fine_errors = Vec::new();
     let rows = run_study(survey(), &area, &mut |event| {
-        if let damage_twin::damage::study::StudyEvent::FineFailed { error, .. } = event {
+        if let damage_twin::studies::mask_noise::StudyEvent::FineFailed { error, .. } = event {
             fine_errors.push(error);
         }
     })
@@ -295,7 +295,7 @@ fn the_mask_noise_study_scores_corrupted_inputs_and_the_twin_against_clean_masks
 
 #[test]
 fn the_stability_suite_perturbs_only_the_training_views_and_scores_the_held_out_ones() {
-    use damage_twin::damage::stability::{Perturbation, perturb, stability_run};
+    use damage_twin::studies::stability::{Perturbation, perturb, stability_run};
     let dataset = survey();
     let base = config(TrainMode::Label, 60);
     let run = prepare_run(dataset, &base).expect("prepares");

@@ -4,23 +4,15 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::Instant;
 
 use anyhow::Context;
 use glam::Vec3;
 use serde::Serialize;
 
-use damage_twin::damage::TrainMode;
-use damage_twin::damage::assess::{EvalRequest, evaluate_model};
-use damage_twin::damage::evaluate::DamageReadout;
-use damage_twin::raster::RenderSettings;
-use damage_twin::scene::{Dataset, ImageScale};
-use damage_twin::splats::Splats;
-use damage_twin::train::importance::{importance, prune_to};
+use damage_twin::damage::compact::{CompactConfig, compact_job, heldout_psnr};
+use damage_twin::scene::ImageScale;
 use damage_twin::train::job::JobOptions;
-use damage_twin::train::run::{TrainSetup, train};
-use damage_twin::train::spec::{DensifyPolicy, TrainSpec};
-use damage_twin::train::views::{load_views, split_views};
+use damage_twin::train::views::split_views;
 
 use super::args::{HoldoutArgs, drive, open_dataset, parse_background, parse_scale, read_model};
 
@@ -120,137 +112,44 @@ struct Report {
     iterations: u32,
 }
 
-/// Mean held-out PSNR of `splats` on the views `indices` of `dataset` (photos only).
-pub fn heldout_psnr(
-    dataset: &Dataset,
-    splats: &Splats,
-    indices: &[usize],
-    scale: ImageScale,
-    background: Vec3,
-) -> anyhow::Result<f64> {
-    let request = EvalRequest {
-        indices: indices.to_vec(),
-        scale,
-        background,
-        sh_degree: splats.sh_degree,
-        photometric: true,
-        readout: DamageReadout {
-            mode: TrainMode::Rgb,
-            ..DamageReadout::for_model(splats, Default::default())
-        },
-    };
-    let scores = evaluate_model(dataset, splats, &request, &mut |_, _| {})?;
-    Ok(scores.psnr.unwrap_or(f64::NAN))
-}
-
-/// How `compact_model` fine-tunes after the prune.
-pub struct Finetune {
-    /// Steps (0: prune only).
-    pub iterations: u32,
-    pub scale: ImageScale,
-    pub background: Vec3,
-    pub seed: u64,
-    pub threads: Option<usize>,
-    pub quiet: bool,
-}
-
-/// A compacted model and the seconds its importance, prune and fine-tune took.
-pub struct Compacted {
-    pub splats: Splats,
-    pub seconds: f64,
-}
-
-/// Prunes `splats` to the `keep` with the most blending weight over the training views
-/// `train_idx` of `dataset`, shows the pruned model to `on_pruned`, then fine-tunes it.
-pub fn compact_model(
-    dataset: &Dataset,
-    mut splats: Splats,
-    train_idx: &[usize],
-    keep: usize,
-    finetune: &Finetune,
-    on_pruned: &mut dyn FnMut(&Splats) -> anyhow::Result<()>,
-) -> anyhow::Result<Compacted> {
-    let started = Instant::now();
-    let views = load_views(dataset, train_idx, finetune.scale, false)
-        .with_context(|| format!("loading the training views of {}", dataset.root.display()))?;
-    let before = splats.len();
-    let settings = RenderSettings::new(finetune.background, splats.sh_degree);
-    let score = importance(&splats, &views, &settings);
-    prune_to(&mut splats, &score, keep);
-    let mut seconds = started.elapsed().as_secs_f64();
-    eprintln!(
-        "pruned {before} → {} Gaussians by importance over {} training views",
-        splats.len(),
-        views.len()
-    );
-    on_pruned(&splats)?;
-
-    // A continuation, not a restart: the fixed set keeps its size (no densification) and moves
-    // at the timeline update's gentle rates; labels are kept as they are.
-    if finetune.iterations > 0 {
-        let mut spec = TrainSpec::reconstruction(finetune.iterations);
-        spec.densify = DensifyPolicy::Off;
-        spec.groups.raw_labels = false;
-        spec.sh_degree = splats.sh_degree;
-        spec.sh_ramp_every = 1;
-        spec.background = finetune.background;
-        spec.seed = finetune.seed;
-        spec.lr = damage_twin::timeline::update::gentle_learning_rates();
-        let setup = TrainSetup {
-            spec,
-            splats,
-            views,
-            heldout: Vec::new(),
-        };
-        let outcome = drive(
-            train(setup, JobOptions::headless(finetune.threads)),
-            "fine-tuning",
-            finetune.quiet,
-            |_| {},
-        )?;
-        seconds += outcome.seconds;
-        splats = Arc::try_unwrap(outcome.splats).unwrap_or_else(|shared| (*shared).clone());
-    }
-    Ok(Compacted { splats, seconds })
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
     let splats = read_model(&args.model)?;
     let dataset = Arc::new(open_dataset(&args.dataset, args.background)?);
-    let (train_idx, test_idx) =
-        split_views(&dataset, &args.holdout.holdout()).map_err(anyhow::Error::msg)?;
+    let holdout = args.holdout.holdout();
+    let (_, test_idx) = split_views(&dataset, &holdout).map_err(anyhow::Error::msg)?;
+    let psnr = |splats: &_| -> anyhow::Result<f64> {
+        Ok(heldout_psnr(
+            &dataset,
+            splats,
+            &test_idx,
+            args.scale,
+            args.background,
+        )?)
+    };
     let before = splats.len();
-    let keep = args.budget.of(before);
-    let psnr_before = heldout_psnr(&dataset, &splats, &test_idx, args.scale, args.background)?;
-
-    let psnr_pruned = std::cell::Cell::new(f64::NAN);
-    let compacted = compact_model(
-        &dataset,
+    let psnr_before = psnr(&splats)?;
+    let config = CompactConfig {
+        keep: args.budget.of(before),
+        iterations: args.iters,
+        scale: args.scale,
+        holdout,
+        background: args.background,
+        seed: args.seed,
+        keep_pruned: true,
+    };
+    let job = compact_job(
+        dataset.clone(),
         splats,
-        &train_idx,
-        keep,
-        &Finetune {
-            iterations: args.iters,
-            scale: args.scale,
-            background: args.background,
-            seed: args.seed,
-            threads: args.threads,
-            quiet: args.quiet,
-        },
-        &mut |pruned| {
-            psnr_pruned.set(heldout_psnr(
-                &dataset,
-                pruned,
-                &test_idx,
-                args.scale,
-                args.background,
-            )?);
-            Ok(())
-        },
-    )?;
+        config,
+        JobOptions::headless(args.threads),
+    );
+    let compacted = drive(job, "compaction", args.quiet, |_| {})?;
+    let psnr_pruned = match &compacted.pruned {
+        Some(pruned) => psnr(pruned)?,
+        None => f64::NAN,
+    };
     let splats = compacted.splats;
-    let psnr_pruned = psnr_pruned.get();
-    let psnr_after = heldout_psnr(&dataset, &splats, &test_idx, args.scale, args.background)?;
+    let psnr_after = psnr(&splats)?;
 
     damage_twin::scene::ply::write_splats(&args.out, &splats)
         .with_context(|| format!("writing {}", args.out.display()))?;

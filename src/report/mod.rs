@@ -1,11 +1,8 @@
 //! Reports: charts and tables of measured results, as files. Presentation only: every figure
 //! arrives computed; nothing here renders a model or trains.
 
-pub mod budget_chart;
 pub mod inspection;
 pub mod project_runs;
-pub mod stability_chart;
-pub mod study_chart;
 pub mod tradeoff_chart;
 pub mod training_chart;
 

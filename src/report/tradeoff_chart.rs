@@ -1,16 +1,14 @@
 //! Speed against accuracy (DESIGN.md "Measuring"): per method (or a project's step) one mark of
-//! held-out IoU (per class) and PSNR against wall time, as PNG and SVG files or an SVG string,
-//! with the hierarchy study's rows as CSV and a Markdown table. Presentation only: the figures
-//! arrive measured.
+//! held-out IoU (per class) and PSNR against wall time, as PNG and SVG files or an SVG string.
+//! Presentation only: the figures arrive measured (the hierarchy study's rows become points in
+//! `studies::hierarchy::table`).
 
 use std::collections::BTreeMap;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::damage::hierarchy::HierarchyRow;
 use crate::report::ChartError;
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
@@ -46,17 +44,6 @@ pub struct TradeoffPoint {
     pub seconds: f64,
     pub iou: BTreeMap<String, f64>,
     pub psnr: f64,
-}
-
-impl From<&HierarchyRow> for TradeoffPoint {
-    fn from(row: &HierarchyRow) -> TradeoffPoint {
-        TradeoffPoint {
-            label: row.method.name().to_string(),
-            seconds: row.seconds,
-            iou: row.iou.clone(),
-            psnr: row.psnr,
-        }
-    }
 }
 
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, rows: &[TradeoffPoint]) -> DrawResult
@@ -147,19 +134,18 @@ where
 pub fn write_tradeoff_chart(
     dir: &Path,
     stem: &str,
-    rows: &[HierarchyRow],
+    points: &[TradeoffPoint],
 ) -> Result<Vec<PathBuf>, ChartError> {
-    let points: Vec<TradeoffPoint> = rows.iter().map(TradeoffPoint::from).collect();
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
     draw(
         BitMapBackend::new(&png, (1200, 500)).into_drawing_area(),
-        &points,
+        points,
     )
     .map_err(|e| ChartError::new(&png, e))?;
     draw(
         SVGBackend::new(&svg, (1200, 500)).into_drawing_area(),
-        &points,
+        points,
     )
     .map_err(|e| ChartError::new(&svg, e))?;
     Ok(vec![png, svg])
@@ -174,65 +160,4 @@ pub fn tradeoff_svg(name: &Path, points: &[TradeoffPoint]) -> Result<String, Cha
     )
     .map_err(|e| ChartError::new(name, e))?;
     Ok(svg)
-}
-
-fn classes(rows: &[HierarchyRow]) -> Vec<String> {
-    rows.iter()
-        .flat_map(|r| r.iou.keys().cloned())
-        .collect::<std::collections::BTreeSet<_>>()
-        .into_iter()
-        .collect()
-}
-
-/// The rows as CSV: method, seconds, psnr, gaussians, then one IoU column per class.
-pub fn tradeoff_csv(rows: &[HierarchyRow]) -> String {
-    let classes = classes(rows);
-    let mut out = String::from("method,seconds,psnr,gaussians");
-    for c in &classes {
-        let _ = write!(out, ",iou_{c}");
-    }
-    out.push('\n');
-    for r in rows {
-        let _ = write!(
-            out,
-            "{},{:.1},{:.3},{}",
-            r.method.name(),
-            r.seconds,
-            r.psnr,
-            r.gaussians
-        );
-        for c in &classes {
-            let _ = write!(out, ",{:.4}", r.iou.get(c).copied().unwrap_or(f64::NAN));
-        }
-        out.push('\n');
-    }
-    out
-}
-
-/// The rows as a Markdown table (for docs/).
-pub fn tradeoff_table(rows: &[HierarchyRow]) -> String {
-    let classes = classes(rows);
-    let mut out = String::from("| method | wall time | PSNR |");
-    for c in &classes {
-        let _ = write!(out, " {c} IoU |");
-    }
-    out.push_str(" Gaussians |\n|---|---|---|");
-    for _ in &classes {
-        out.push_str("---|");
-    }
-    out.push_str("---|\n");
-    for r in rows {
-        let _ = write!(
-            out,
-            "| {} | {:.0} s | {:.2} dB |",
-            r.method.name(),
-            r.seconds,
-            r.psnr
-        );
-        for c in &classes {
-            let _ = write!(out, " {:.3} |", r.iou.get(c).copied().unwrap_or(f64::NAN));
-        }
-        let _ = writeln!(out, " {} |", r.gaussians);
-    }
-    out
 }

@@ -52,18 +52,8 @@ pub const NEIGHBOUR_GEOMETRY_RATE: f32 = 0.1;
 /// (docs/TIMELINE.md, "Update, measured").
 pub const UPDATE_MAX_SCALE_GROWTH: f32 = 2.0;
 
-/// Gentler rates for the update (`twin update --gentle-rates`): position 1.6e-5 × extent,
-/// log-scale 1e-3, opacity 0.01, a continuation rather than a restart. They keep the earlier
-/// views 0.7 dB better still but learn 7.7 m less of the new cracks on the demo, so they are not
-/// the default.
-pub fn gentle_learning_rates() -> crate::train::spec::LrOverrides {
-    crate::train::spec::LrOverrides {
-        means: Some(1.6e-5),
-        log_scales: Some(1e-3),
-        raw_opacities: Some(0.01),
-        ..Default::default()
-    }
-}
+// The gentle rates are a training preset (compaction's fine-tune uses them too).
+pub use crate::train::spec::gentle_learning_rates;
 
 impl UpdateConfig {
     /// The update as the project sets it up: its class colours, background and held-out views,

@@ -5,6 +5,7 @@
 pub mod adam;
 pub mod appearance;
 pub mod backend_choice;
+pub mod compact;
 pub mod densify;
 pub mod evaluate;
 pub mod focus;

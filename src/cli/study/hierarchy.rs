@@ -1,7 +1,7 @@
 //! `damage-twin study hierarchy DATASET --out DIR`: full high-resolution training against the
 //! hierarchy (coarse, coarse + fine-tune, coarse + retrain), each timed and scored at high
 //! resolution on the held-out views. Writes `hierarchy-study.json`, `.csv`, `.md` and the
-//! speed-against-accuracy chart (`.png`, `.svg`). The study itself is `damage::hierarchy`.
+//! speed-against-accuracy chart (`.png`, `.svg`). The study itself is `studies::hierarchy`.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -11,9 +11,11 @@ use anyhow::Context;
 use glam::Vec3;
 use serde::Serialize;
 
-use damage_twin::damage::hierarchy::{HierarchyRow, Method, default_config, hierarchy_job};
-use damage_twin::report::tradeoff_chart::{tradeoff_csv, tradeoff_table, write_tradeoff_chart};
 use damage_twin::scene::ImageScale;
+use damage_twin::studies::hierarchy::table::{
+    hierarchy_csv, hierarchy_table, write_hierarchy_chart,
+};
+use damage_twin::studies::hierarchy::{HierarchyRow, Method, default_config, hierarchy_job};
 use damage_twin::train::job::JobOptions;
 
 use super::write_text;
@@ -125,10 +127,10 @@ pub fn run(args: HierarchyArgs) -> anyhow::Result<()> {
         "hierarchy-study.json",
         &serde_json::to_string_pretty(&file)?,
     )?;
-    write_text(&args.out, "hierarchy-study.csv", &tradeoff_csv(rows))?;
-    let table = tradeoff_table(rows);
+    write_text(&args.out, "hierarchy-study.csv", &hierarchy_csv(rows))?;
+    let table = hierarchy_table(rows);
     write_text(&args.out, "hierarchy-study.md", &table)?;
-    write_tradeoff_chart(&args.out, "hierarchy-study", rows)?;
+    write_hierarchy_chart(&args.out, "hierarchy-study", rows)?;
     println!("{table}");
     Ok(())
 }

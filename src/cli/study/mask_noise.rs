@@ -13,9 +13,9 @@ use serde::Serialize;
 use damage_twin::damage::TrainMode;
 use damage_twin::damage::refine::RefineConfig;
 use damage_twin::damage::setup::RunConfig;
-use damage_twin::damage::study::{NoiseModel, StudyConfig, StudyEvent, StudyRow, run_study};
-use damage_twin::report::study_chart::{study_csv, study_table, write_study_chart};
 use damage_twin::scene::ImageScale;
+use damage_twin::studies::mask_noise::chart::{study_csv, study_table, write_study_chart};
+use damage_twin::studies::mask_noise::{NoiseModel, StudyConfig, StudyEvent, StudyRow, run_study};
 
 use super::{read_saved, write_text};
 use crate::cli::args::{HoldoutArgs, open_dataset, palette, parse_scale, print_line};

@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::damage::study::{StudyRow, StudyStage};
 use crate::damage::{DamageClass, TrainMode};
 use crate::report::ChartError;
+use crate::studies::mask_noise::rows::{StudyRow, StudyStage};
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
@@ -385,7 +385,7 @@ mod tests {
 
     #[test]
     fn the_chart_has_one_legend_per_row_of_panels_and_none_inside_them() {
-        let json = include_str!("../../docs/figures/mask-noise-study.json");
+        let json = include_str!("../../../docs/figures/mask-noise-study.json");
         let study: Study = serde_json::from_str(json).expect("the study in docs/ parses");
         let dir = tempfile::tempdir().expect("temp dir");
         let files = write_study_chart(dir.path(), "study", &study.rows).expect("chart drawn");

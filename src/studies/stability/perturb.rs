@@ -1,44 +1,10 @@
-//! The stability suite (issue 24 §3): one twin per setting, each axis moved alone from the
-//! baseline run, scored on the same held-out views (PSNR, SSIM, damage IoU against the clean
-//! masks). An axis shows where quality breaks: fewer training views, noisy training poses, a
-//! coarser training scale, a textureless building. The held-out views and their poses are never
-//! perturbed, so every row is scored against the same truth. Reads no files beyond the dataset.
-
-use std::collections::BTreeMap;
+//! What a stability run changes in the training views: fewer of them, evenly spread, or their
+//! poses turned and moved by a set angle. The held-out views are never perturbed.
 
 use glam::{Quat, Vec3};
-use serde::{Deserialize, Serialize};
 
-use crate::damage::assess::{EvalRequest, evaluate_model};
-use crate::damage::evaluate::DamageReadout;
-use crate::damage::setup::{RunConfig, prepare_run};
-use crate::damage::{Palette, TrainMode};
-use crate::scene::{Camera, Dataset};
-use crate::train::job::JobOptions;
-use crate::train::run::train;
+use crate::scene::Camera;
 use crate::train::spec::TrainView;
-
-/// One row of the study.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct StabilityRow {
-    /// `textureless`, `views`, `pose_noise`, `mask_noise` or `scale`.
-    pub axis: String,
-    /// The axis's setting: 0/1 (textured/flat colours), training views, degrees of pose noise,
-    /// mask corruption rate, or the training image's downscale factor.
-    pub value: f64,
-    /// Held-out PSNR (dB) and SSIM, against the photos (SSIM absent on rows taken from the
-    /// mask-noise study, which does not measure it).
-    pub psnr: f64,
-    pub ssim: Option<f64>,
-    /// Held-out IoU per damage class against the clean masks.
-    pub iou: BTreeMap<String, f64>,
-    pub gaussians: usize,
-    /// Training time, held-out evaluation excluded.
-    pub seconds: f64,
-    /// Training image size.
-    pub width: u32,
-    pub height: u32,
-}
 
 /// What a run changes from the baseline.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -53,60 +19,6 @@ pub enum Perturbation {
         degrees: f32,
         seed: u64,
     },
-}
-
-/// Trains `config` on `dataset` with `perturbation` applied to the training views and scores
-/// the result on the held-out views. `axis` and `value` name the row.
-pub fn stability_run(
-    dataset: &Dataset,
-    config: &RunConfig,
-    perturbation: Perturbation,
-    axis: &str,
-    value: f64,
-    threads: Option<usize>,
-) -> Result<StabilityRow, String> {
-    let name = |e: String| format!("{axis} = {value}: {e}");
-    let mut run = prepare_run(dataset, config).map_err(|e| name(e.to_string()))?;
-    perturb(&mut run.setup.views, perturbation).map_err(name)?;
-    let views = &run.setup.views;
-    let (width, height) = (views[0].image.width, views[0].image.height);
-    let heldout_indices = run.heldout_indices.clone();
-    run.setup.heldout.clear(); // scored below, once, not during training
-    let outcome = train(run.setup, JobOptions::headless(threads))
-        .wait()
-        .map_err(|e| name(e.to_string()))?;
-    let readout = DamageReadout {
-        mode: run.mode,
-        ..DamageReadout::for_model(&outcome.splats, Palette::default())
-    };
-    let scores = evaluate_model(
-        dataset,
-        &outcome.splats,
-        &EvalRequest {
-            indices: heldout_indices,
-            scale: config.scale,
-            background: config.background,
-            sh_degree: config.sh_degree,
-            photometric: true,
-            readout,
-        },
-        &mut |_, _| {},
-    )
-    .map_err(|e| name(e.to_string()))?;
-    Ok(StabilityRow {
-        axis: axis.to_string(),
-        value,
-        psnr: scores.psnr.unwrap_or(f64::NAN),
-        ssim: scores.ssim,
-        iou: match (&scores.damage, run.mode) {
-            (Some(d), TrainMode::Label | TrainMode::Overlay) => d.iou.clone(),
-            _ => BTreeMap::new(),
-        },
-        gaussians: outcome.splats.len(),
-        seconds: outcome.seconds,
-        width,
-        height,
-    })
 }
 
 /// Applies `perturbation` to a run's training views.

@@ -4,28 +4,12 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::report::ChartError;
+use crate::studies::budget::rows::BudgetRow;
 use plotters::coord::Shift;
 use plotters::prelude::*;
-use serde::{Deserialize, Serialize};
-
-use crate::report::ChartError;
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
-
-/// One measured model of the study.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct BudgetRow {
-    pub scene: String,
-    /// `full`, `budget 50%` (of the full run's count), `compact 50%` (of the full model).
-    pub method: String,
-    /// Mean held-out PSNR, dB.
-    pub psnr: f64,
-    pub gaussians: usize,
-    /// Size of the model as PLY.
-    pub bytes: u64,
-    /// Wall time to make the model (a compact row includes the full run it starts from).
-    pub seconds: f64,
-}
 
 /// The PSNR a budget must reach: the full run's minus 0.1 dB (issue 24 §4).
 pub const TARGET_MARGIN_DB: f64 = 0.1;

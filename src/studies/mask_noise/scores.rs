@@ -7,10 +7,11 @@ use crate::damage::Palette;
 use crate::damage::TrainMode;
 use crate::damage::evaluate::{DamageReadout, DamageScores, ReferenceView, predicted_masks};
 use crate::damage::setup::{RunConfig, apply_mode};
-use crate::damage::study::{CleanTraining, StudyRow, StudyStage};
 use crate::metrics::MaskAgreement;
 use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
 use crate::scene::{Dataset, Mask};
+use crate::studies::mask_noise::clean::CleanTraining;
+use crate::studies::mask_noise::rows::{StudyRow, StudyStage};
 use crate::train::views::load_views;
 
 /// Agreement of the corrupted training masks with the clean ones, per class, over every

@@ -7,78 +7,17 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::Instant;
 
-use serde::{Deserialize, Serialize};
-
-use crate::damage::Palette;
 use crate::damage::assess::{EvalRequest, evaluate_model};
 use crate::damage::evaluate::DamageReadout;
 use crate::damage::refine::{RefineConfig, Strategy, refine};
 use crate::damage::setup::{RunConfig, prepare_run};
-use crate::scene::{Dataset, ImageScale};
+use crate::scene::Dataset;
 use crate::splats::Splats;
+use crate::studies::hierarchy::config::{HierarchyConfig, Method};
+use crate::studies::hierarchy::rows::{HierarchyOutcome, HierarchyRow};
 use crate::train::job::{Job, JobContext, JobError, JobOptions};
 use crate::train::run::run_training;
 use crate::train::views::split_views;
-
-/// The four methods.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Method {
-    Full,
-    Coarse,
-    Finetune,
-    Retrain,
-}
-
-impl Method {
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Full => "full",
-            Method::Coarse => "coarse",
-            Method::Finetune => "finetune",
-            Method::Retrain => "retrain",
-        }
-    }
-}
-
-/// The study's settings.
-#[derive(Clone, Debug, PartialEq)]
-pub struct HierarchyConfig {
-    /// The run every method starts from (mode, palette, held-out rule, seed, background); its
-    /// scale and iterations are replaced per method.
-    pub run: RunConfig,
-    pub coarse_scale: ImageScale,
-    pub coarse_iterations: u32,
-    /// "High resolution": where the full run trains, refinements refine and everything is
-    /// scored.
-    pub fine_scale: ImageScale,
-    pub full_iterations: u32,
-    pub refine: RefineConfig,
-    pub methods: Vec<Method>,
-}
-
-/// One method's figures (`hierarchy-study.json` `rows`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct HierarchyRow {
-    pub method: Method,
-    /// Wall time of everything the method needs (a refinement includes its coarse twin).
-    pub seconds: f64,
-    /// Wall time per phase.
-    pub phases: BTreeMap<String, f64>,
-    /// Held-out IoU per class at high resolution.
-    pub iou: BTreeMap<String, f64>,
-    /// Held-out PSNR at high resolution.
-    pub psnr: f64,
-    pub gaussians: usize,
-}
-
-/// What the study produced.
-#[derive(Clone, Debug)]
-pub struct HierarchyOutcome {
-    pub rows: Vec<HierarchyRow>,
-    /// Width and height of "high resolution".
-    pub fine_size: (u32, u32),
-}
 
 /// Runs the study as a job.
 pub fn hierarchy_job(
@@ -219,26 +158,4 @@ pub fn run_hierarchy(
         });
     }
     Ok(HierarchyOutcome { rows, fine_size })
-}
-
-/// The study's default settings on the demo building (960×540): a 240×135 coarse twin of 3000
-/// steps, 1000 refinement steps at 960×540, and a 960×540 full run of 3000 steps.
-pub fn default_config(palette: Palette) -> HierarchyConfig {
-    HierarchyConfig {
-        run: RunConfig {
-            palette,
-            ..RunConfig::default()
-        },
-        coarse_scale: ImageScale::Factor(4),
-        coarse_iterations: 3000,
-        fine_scale: ImageScale::Factor(1),
-        full_iterations: 3000,
-        refine: RefineConfig::default(),
-        methods: vec![
-            Method::Coarse,
-            Method::Finetune,
-            Method::Retrain,
-            Method::Full,
-        ],
-    }
 }

@@ -16,12 +16,13 @@ use crate::damage::evaluate::{DamageReadout, evaluate_damage};
 use crate::damage::reference::{ReferenceSource, load_reference_views};
 use crate::damage::refine::{RefineConfig, Strategy, refine};
 use crate::damage::select::SelectConfig;
-use crate::damage::study::{StudyConfig, StudyRow, StudyStage, corrupt, load_clean_training};
-use crate::damage::study_scores::{
-    Inputs, agreement, heldout_psnr, rows_for, score_training_views,
-};
 use crate::scene::{Dataset, ImageScale, Mask};
 use crate::splats::Splats;
+use crate::studies::mask_noise::clean::{corrupt, load_clean_training};
+use crate::studies::mask_noise::rows::{StudyConfig, StudyRow, StudyStage};
+use crate::studies::mask_noise::scores::{
+    Inputs, agreement, heldout_psnr, rows_for, score_training_views,
+};
 use crate::train::job::{Job, JobOptions};
 
 /// The resolution the stage refines and scores at: the photos'.

@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::damage::stability::StabilityRow;
 use crate::report::ChartError;
+use crate::studies::stability::row::StabilityRow;
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
