@@ -4,10 +4,12 @@
 //! nothing of its own (`measure` splats labels straight onto a surface plane).
 
 pub mod assess;
+pub mod bake;
 pub mod bench;
 pub mod display;
 pub mod evaluate;
 pub mod hierarchy;
+pub mod hull_picture;
 pub mod hulls;
 pub mod layer;
 pub mod measure;

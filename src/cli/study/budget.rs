@@ -35,6 +35,9 @@ pub struct BudgetArgs {
     pub iters: u32,
     #[command(flatten)]
     pub run: RunArgs,
+    /// Training threads (default: all cores, or RAYON_NUM_THREADS).
+    #[arg(long)]
+    pub threads: Option<usize>,
     /// `train --budget` runs, as fractions of the full run's final count.
     #[arg(long, value_delimiter = ',', default_value = "0.5,0.3")]
     pub budgets: Vec<f64>,
@@ -91,20 +94,20 @@ pub fn run(args: BudgetArgs) -> anyhow::Result<()> {
         write_budget_chart(&args.out, "budget-study", &file.rows)?;
         return Ok(());
     }
-    let dataset: Arc<Dataset> = Arc::new(open_dataset(&args.dataset, args.run.background)?);
+    let dataset: Arc<Dataset> = Arc::new(open_dataset(&args.dataset, args.run.images.background)?);
     let holdout = args.run.holdout.holdout();
     let (train_idx, test_idx) = split_views(&dataset, &holdout).map_err(anyhow::Error::msg)?;
     std::fs::create_dir_all(args.out.join("models"))
         .with_context(|| format!("creating {}", args.out.join("models").display()))?;
-    let threads = args.run.threads.unwrap_or_else(rayon::current_num_threads);
+    let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     let base = RunConfig {
         mode: TrainMode::Rgb,
-        scale: args.run.scale,
+        scale: args.run.images.scale,
         iterations: args.iters,
         holdout,
         sh_degree: args.run.sh_degree,
         seed: args.run.seed,
-        background: args.run.background,
+        background: args.run.images.background,
         random_points: args.run.init_points,
         eval_every: 0,
         ..RunConfig::default()
@@ -114,8 +117,8 @@ pub fn run(args: BudgetArgs) -> anyhow::Result<()> {
             &dataset,
             splats,
             &test_idx,
-            args.run.scale,
-            args.run.background,
+            args.run.images.scale,
+            args.run.images.background,
         )
     };
     let mut rows = Vec::new();
@@ -155,8 +158,8 @@ pub fn run(args: BudgetArgs) -> anyhow::Result<()> {
         let keep = (full.len() as f64 * fraction).round().max(1.0) as usize;
         let finetune = Finetune {
             iterations: args.compact_iters,
-            scale: args.run.scale,
-            background: args.run.background,
+            scale: args.run.images.scale,
+            background: args.run.images.background,
             seed: args.run.seed,
             threads: Some(threads),
             quiet: true,
@@ -193,7 +196,7 @@ pub fn run(args: BudgetArgs) -> anyhow::Result<()> {
     file.rows.extend(rows);
     file.scenes.retain(|s| s.scene != args.scene);
     let first = &dataset.views[train_idx[0]].camera.intrinsics;
-    let (width, height) = args.run.scale.apply(first.width, first.height);
+    let (width, height) = args.run.images.scale.apply(first.width, first.height);
     file.scenes.push(SceneRun {
         scene: args.scene.clone(),
         dataset: args.dataset.display().to_string(),
