@@ -119,6 +119,7 @@ fn settings_from_before_versions_take_the_new_label_weight_default() {
     let old =
         "(training: (iterations: 3000, resolution_factor: 4, mode: label, label_weight: 0.1))";
     let s = Settings::from_ron(old).expect("parses");
+    assert_eq!(s.training.scale, damage_twin::scene::ImageScale::Factor(4));
     assert_eq!(
         s.training.label_weight,
         TrainingSettings::default().label_weight

@@ -39,7 +39,7 @@ fn the_viewer_trains_a_small_building_live_and_obeys_pause_and_stop() {
     let settings = Settings {
         training: TrainingSettings {
             iterations: 60,
-            resolution_factor: 1,
+            scale: damage_twin::scene::ImageScale::Factor(1),
             mode: TrainMode::Label,
             label_weight: 0.1,
             budget: None,

@@ -168,8 +168,8 @@ impl Settings {
         self.compare_blend = clamp(self.compare_blend, 0.0, 1.0, d.compare_blend);
         self.damage.opacity = clamp(self.damage.opacity, 0.0, 1.0, d.damage.opacity);
         self.training.iterations = self.training.iterations.clamp(1, 1_000_000);
-        if ![1, 2, 4, 8].contains(&self.training.resolution_factor) {
-            self.training.resolution_factor = 1;
+        if !self.training.scale.is_valid() {
+            self.training.scale = crate::scene::ImageScale::Factor(1);
         }
         self.training.budget = self.training.budget.map(|n| n.clamp(1, 10_000_000));
         self.training.label_weight = clamp(

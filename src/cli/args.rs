@@ -1,5 +1,7 @@
-//! What several subcommands share: how a run reads its dataset (scale, SH degree, held-out rule,
-//! background, threads), the value parsers, and drawing a job's progress on the terminal.
+//! What several subcommands share: argument groups (a job's threads and progress bar, how a
+//! dataset's photos are read, the held-out rule, how a training run starts, a project's scale),
+//! the one conversion from arguments to a run, the value parsers, and drawing a job's progress
+//! on the terminal.
 
 use std::path::Path;
 use std::time::Duration;
@@ -9,31 +11,60 @@ use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use damage_twin::damage::Palette;
+use damage_twin::damage::setup::RunConfig;
 use damage_twin::scene::open::OpenOptions;
 use damage_twin::scene::{Dataset, ImageScale};
 use damage_twin::train::backend_choice::Backend;
-use damage_twin::train::job::{Job, JobEvent, Progress};
+use damage_twin::train::job::{Job, JobEvent, JobOptions, Progress};
 use damage_twin::train::views::Holdout;
 
-/// How a run reads its dataset and starts: shared by `train` and `bench`, so the two time the
-/// same run.
+/// How a job runs on the terminal: the subcommands that start one long job share these.
 #[derive(clap::Args, Debug)]
-pub struct RunArgs {
-    /// Image scale: 1, 2, 4, 8, 0.25 or w<width>.
+pub struct JobArgs {
+    /// Worker threads (default: all cores, or RAYON_NUM_THREADS).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// No progress bar (log lines only).
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+impl JobArgs {
+    /// A job run from the terminal on `--threads` workers.
+    pub fn options(&self) -> JobOptions {
+        JobOptions::headless(self.threads)
+    }
+
+    /// The number of threads the job runs on (for reports).
+    pub fn thread_count(&self) -> usize {
+        self.threads.unwrap_or_else(rayon::current_num_threads)
+    }
+}
+
+/// How a dataset's photos are read: at which scale, composited on which background. Shared by
+/// every subcommand that renders or trains against a dataset's views.
+#[derive(clap::Args, Debug)]
+pub struct ImageArgs {
+    /// Image scale: 1, 2, 4, 8, 0.5, 0.25, 0.125 or w<width>.
     #[arg(long, default_value = "1", value_parser = parse_scale)]
     pub scale: ImageScale,
+    /// Background: white, black or r,g,b in [0, 1].
+    #[arg(long, default_value = "black", value_parser = parse_background)]
+    pub background: Vec3,
+}
+
+/// How a training run reads its dataset and starts: shared by `train` and `bench`, so the two
+/// time the same run.
+#[derive(clap::Args, Debug)]
+pub struct RunArgs {
+    #[command(flatten)]
+    pub images: ImageArgs,
     #[arg(long, default_value_t = 3)]
     pub sh_degree: u32,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     #[command(flatten)]
     pub holdout: HoldoutArgs,
-    /// Background: white, black or r,g,b in [0, 1].
-    #[arg(long, default_value = "black", value_parser = parse_background)]
-    pub background: Vec3,
-    /// Training threads (default: all cores, or RAYON_NUM_THREADS).
-    #[arg(long)]
-    pub threads: Option<usize>,
     /// Random initial points when the dataset has none (NeRF-synthetic, instant-ngp).
     #[arg(long, default_value_t = 100_000)]
     pub init_points: usize,
@@ -41,6 +72,41 @@ pub struct RunArgs {
     /// or auto (a hardware GPU when there is one, else the CPU).
     #[arg(long, default_value = "cpu")]
     pub backend: Backend,
+}
+
+impl RunArgs {
+    /// The run these arguments describe, `iterations` steps long; every other setting is
+    /// `RunConfig::default()`'s, for the caller to override. The one place the CLI turns its
+    /// arguments into a run.
+    pub fn config(&self, iterations: u32) -> RunConfig {
+        RunConfig {
+            scale: self.images.scale,
+            iterations,
+            holdout: self.holdout.holdout(),
+            sh_degree: self.sh_degree,
+            seed: self.seed,
+            background: self.images.background,
+            random_points: self.init_points,
+            backend: self.backend,
+            ..RunConfig::default()
+        }
+    }
+}
+
+/// `--scale` where the twin project's scale is the default (`ProjectSettings::scale`).
+#[derive(clap::Args, Debug)]
+pub struct ProjectScaleArgs {
+    /// Image scale: 1, 2, 4, 8, 0.5, 0.25, 0.125 or w<width> (default: the project's scale,
+    /// `twin new --scale`).
+    #[arg(long, value_parser = parse_scale)]
+    pub scale: Option<ImageScale>,
+}
+
+impl ProjectScaleArgs {
+    /// `--scale`, else the project's.
+    pub fn or_project(&self, twin: &damage_twin::timeline::Twin) -> ImageScale {
+        self.scale.unwrap_or(twin.project.settings.scale)
+    }
 }
 
 /// Which views are held out: the rule `train`, `bench`, `eval` and `study` share.

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use damage_twin::damage::bench::bench_job;
-use damage_twin::damage::setup::RunConfig;
 use damage_twin::train::job::JobOptions;
 
 use super::args::{RunArgs, drive, open_dataset};
@@ -18,22 +17,17 @@ pub struct Args {
     pub iters: u32,
     #[command(flatten)]
     pub run: RunArgs,
+    // Not `JobArgs`: a benchmark draws no progress bar (it would take time from what it
+    // measures), so it has no `--quiet`.
+    /// Training threads (default: all cores, or RAYON_NUM_THREADS).
+    #[arg(long)]
+    pub threads: Option<usize>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let dataset = Arc::new(open_dataset(&args.dataset, args.run.background)?);
-    let config = RunConfig {
-        scale: args.run.scale,
-        iterations: args.iters,
-        holdout: args.run.holdout.holdout(),
-        sh_degree: args.run.sh_degree,
-        seed: args.run.seed,
-        background: args.run.background,
-        random_points: args.run.init_points,
-        backend: args.run.backend,
-        ..RunConfig::default()
-    };
-    let job = bench_job(dataset, config, JobOptions::headless(args.run.threads));
+    let dataset = Arc::new(open_dataset(&args.dataset, args.run.images.background)?);
+    let config = args.run.config(args.iters);
+    let job = bench_job(dataset, config, JobOptions::headless(args.threads));
     let report = drive(job, "benchmark", true, |_| {})?;
     println!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())

@@ -6,14 +6,14 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use glam::{Quat, Vec3};
+use glam::Vec3;
 use serde_json::json;
 
 use damage_twin::gpu::{GpuContext, GpuRenderSettings, GpuRenderer};
 use damage_twin::raster::{Rasterizer, RenderOutput, RenderSettings};
 use damage_twin::scene::{Camera, Intrinsics};
 use damage_twin::splats::Splats;
-use damage_twin::splats::model::{SH_C0, logit};
+use damage_twin::splats::random::random_in_view;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -65,7 +65,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     let splats = match splats {
         Some(s) => s,
-        None => random_splats(args.random.unwrap_or(0), &camera, 7),
+        None => random_in_view(args.random.unwrap_or(0), &camera, 7),
     };
     let frames = args.frames.max(1);
     let k = camera.intrinsics;
@@ -327,53 +327,4 @@ fn choose_camera(
         bail!("image size must be positive, got {w}x{h}");
     }
     Ok(camera.resized(w, h))
-}
-
-/// `n` random Gaussians inside the camera's view between depths 2 and 12, a few pixels to a few
-/// dozen across, SH degree 3 with a random DC colour and small higher-order terms.
-fn random_splats(n: usize, camera: &Camera, seed: u64) -> Splats {
-    let mut rng = fastrand::Rng::with_seed(seed);
-    let mut s = Splats::empty(3, 0);
-    let k = camera.intrinsics;
-    let cam_to_world = camera.rotation.inverse();
-    let centre = camera.position();
-    let mut sh = vec![0.0f32; 48];
-    for i in 0..n {
-        let z = 2.0 + 10.0 * rng.f32();
-        let px = rng.f32() * k.width as f32;
-        let py = rng.f32() * k.height as f32;
-        let p_cam = Vec3::new((px - k.cx) / k.fx * z, (py - k.cy) / k.fy * z, z);
-        let mean = centre + cam_to_world * p_cam;
-        // Pixel footprint 1..20 px at this depth.
-        let size_px = 1.0 + 19.0 * rng.f32() * rng.f32();
-        let sigma = size_px * z / k.fx / 3.0;
-        let log_scale = Vec3::new(
-            (sigma * (0.5 + rng.f32())).ln(),
-            (sigma * (0.5 + rng.f32())).ln(),
-            (sigma * (0.5 + rng.f32())).ln(),
-        );
-        let rotation = Quat::from_xyzw(
-            rng.f32() - 0.5,
-            rng.f32() - 0.5,
-            rng.f32() - 0.5,
-            rng.f32() - 0.5,
-        );
-        for v in sh.iter_mut().take(3) {
-            *v = (rng.f32() - 0.5) / SH_C0;
-        }
-        for v in sh.iter_mut().skip(3) {
-            *v = (rng.f32() - 0.5) * 0.2;
-        }
-        s.push(
-            mean,
-            log_scale,
-            rotation,
-            logit(0.2 + 0.7 * rng.f32()),
-            &sh,
-            &[],
-            i as u64,
-            0,
-        );
-    }
-    s
 }

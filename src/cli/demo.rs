@@ -88,7 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // viewer demo's quarter of 960×540).
     let training = TrainingSettings {
         iterations: args.iterations,
-        resolution_factor: 2,
+        scale: damage_twin::scene::ImageScale::Factor(2),
         mode: args.mode,
         ..TrainingSettings::default()
     };
@@ -118,6 +118,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         background: glam::Vec3::ZERO,
         sh_degree: outcome.splats.sh_degree,
         photometric: false,
+        half_appearance: false,
         readout: DamageReadout {
             mode: eval_mode,
             ..DamageReadout::for_model(&outcome.splats, palette)

@@ -5,19 +5,15 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use glam::Vec3;
 use serde::Serialize;
 
 use damage_twin::damage::TrainMode;
 use damage_twin::damage::assess::{EvalRequest, ViewScore, evaluate_job};
 use damage_twin::damage::evaluate::{DamageFigures, DamageReadout, OverlaySource};
-use damage_twin::scene::ImageScale;
 use damage_twin::train::job::JobOptions;
 use damage_twin::train::views::split_views;
 
-use super::args::{
-    HoldoutArgs, drive, open_dataset, palette, parse_background, parse_scale, read_model,
-};
+use super::args::{HoldoutArgs, ImageArgs, drive, open_dataset, palette, read_model};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -25,12 +21,10 @@ pub struct Args {
     pub model: PathBuf,
     /// The dataset it was trained on.
     pub dataset: PathBuf,
-    #[arg(long, default_value = "1", value_parser = parse_scale)]
-    pub scale: ImageScale,
+    #[command(flatten)]
+    pub images: ImageArgs,
     #[command(flatten)]
     pub holdout: HoldoutArgs,
-    #[arg(long, default_value = "black", value_parser = parse_background)]
-    pub background: Vec3,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -74,45 +68,9 @@ struct Report {
     psnr_half_appearance: Option<f64>,
 }
 
-/// The NeRF-W protocol: per held-out view, the light fitted on the left half of the photo (gain
-/// and offset per channel, `timeline::appearance::fit_transform`) is applied to the render, and
-/// PSNR is taken over the right half (used pixels only). The mean over views.
-fn half_appearance_psnr(
-    splats: &damage_twin::splats::Splats,
-    dataset: &damage_twin::scene::Dataset,
-    indices: &[usize],
-    scale: ImageScale,
-    background: Vec3,
-) -> anyhow::Result<f64> {
-    use damage_twin::raster::{RenderSettings, render};
-    let settings = RenderSettings::new(background, splats.sh_degree);
-    let mut total = 0.0;
-    for &index in indices {
-        let view = dataset.load_view(index, scale)?;
-        let out = render(splats, &view.camera, &settings);
-        let w = view.image.width as usize;
-        let used = |p: usize| view.ignore.as_ref().is_none_or(|m| m.data[p] != 0);
-        let light =
-            damage_twin::timeline::appearance::fit_transform(&out.color, &view.image.data, &|p| {
-                p % w < w / 2 && used(p)
-            });
-        let mut lit = damage_twin::scene::RgbImage {
-            width: out.width,
-            height: out.height,
-            data: out.color,
-        };
-        light.apply(&mut lit);
-        let right: Vec<u8> = (0..w * view.image.height as usize)
-            .map(|p| u8::from(p % w >= w / 2 && used(p)))
-            .collect();
-        total += damage_twin::metrics::psnr_masked(&lit.data, &view.image.data, &right);
-    }
-    Ok(total / indices.len().max(1) as f64)
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
     let splats = Arc::new(read_model(&args.model)?);
-    let dataset = Arc::new(open_dataset(&args.dataset, args.background)?);
+    let dataset = Arc::new(open_dataset(&args.dataset, args.images.background)?);
     let (_, test_idx) =
         split_views(&dataset, &args.holdout.holdout()).map_err(anyhow::Error::msg)?;
     let mut readout = DamageReadout::for_model(&splats, palette(&args.colours)?);
@@ -125,22 +83,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let request = EvalRequest {
         indices: test_idx,
-        scale: args.scale,
-        background: args.background,
+        scale: args.images.scale,
+        background: args.images.background,
         sh_degree: splats.sh_degree,
         photometric: true,
+        half_appearance: args.half_appearance,
         readout,
-    };
-    let half = if args.half_appearance {
-        Some(half_appearance_psnr(
-            &splats,
-            &dataset,
-            &request.indices,
-            args.scale,
-            args.background,
-        )?)
-    } else {
-        None
     };
     let job = evaluate_job(dataset, splats.clone(), request, JobOptions::headless(None));
     let scores = drive(job, "evaluation", args.json, |_| {})?;
@@ -152,7 +100,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         damage_mode: scores.damage.as_ref().map(|_| readout.mode),
         damage_reference: scores.damage_reference,
         damage: scores.damage,
-        psnr_half_appearance: half,
+        psnr_half_appearance: scores.psnr_half_appearance,
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

@@ -6,22 +6,21 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::Context;
-use glam::Vec3;
 use serde::Serialize;
 
 use damage_twin::damage::display::{DisplayStyle, render_png, save_png};
 use damage_twin::damage::evaluate::DamageReadout;
+use damage_twin::damage::hull_picture::hull_picture;
 use damage_twin::damage::refine::{RefineConfig, RefineOutcome, Strategy, refine_job};
 use damage_twin::damage::select::{SelectConfig, Validation};
 use damage_twin::damage::{DamageClass, Palette, TrainMode};
 use damage_twin::scene::atomic::write_atomic;
 use damage_twin::scene::run_folder::RunFolder;
-use damage_twin::scene::{Dataset, ImageScale, RgbImage};
+use damage_twin::scene::{Dataset, ImageScale};
 use damage_twin::train::focus::hulls::HullConfig;
-use damage_twin::train::job::JobOptions;
 
 use super::args::{
-    HoldoutArgs, drive, open_dataset, palette, parse_background, parse_scale, read_model,
+    HoldoutArgs, ImageArgs, JobArgs, drive, open_dataset, palette, parse_scale, read_model,
 };
 
 #[derive(clap::Args, Debug)]
@@ -38,9 +37,9 @@ pub struct Args {
     /// finetune (the selection as it is) or retrain (with density control in the selection).
     #[arg(long, default_value = "finetune")]
     pub strategy: Strategy,
-    /// The high resolution the selection is refined at.
-    #[arg(long, default_value = "1", value_parser = parse_scale)]
-    pub scale: ImageScale,
+    // `--scale`: the high resolution the selection is refined at.
+    #[command(flatten)]
+    pub images: ImageArgs,
     #[arg(long, default_value_t = 1000)]
     pub iters: u32,
     /// The renderer that trains: cpu, gpu or auto (see `train --backend`).
@@ -59,7 +58,8 @@ pub struct Args {
     /// One hull per view (the paper) instead of one per connected damage region.
     #[arg(long)]
     pub hull_per_view: bool,
-    /// The resolution of the masks the selection is validated against.
+    /// The resolution of the masks the selection is validated against (`--scale` is the high
+    /// resolution the selection is refined at).
     #[arg(long, default_value = "4", value_parser = parse_scale)]
     pub select_scale: ImageScale,
     /// How damage is read: label or overlay (default: label when the model has label channels).
@@ -70,17 +70,13 @@ pub struct Args {
     pub colours: Vec<String>,
     #[command(flatten)]
     pub holdout: HoldoutArgs,
-    #[arg(long, default_value = "black", value_parser = parse_background)]
-    pub background: Vec3,
     /// Weight of damage pixels in the label cross-entropy (label mode).
     #[arg(long, default_value_t = RefineConfig::default().label_pos_weight)]
     pub label_pos_weight: f32,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    #[arg(long)]
-    pub threads: Option<usize>,
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub job: JobArgs,
 }
 
 #[derive(Serialize)]
@@ -117,7 +113,7 @@ pub fn parse_classes(names: &[String]) -> anyhow::Result<Vec<DamageClass>> {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let model = Arc::new(read_model(&args.model)?);
-    let dataset = Arc::new(open_dataset(&args.dataset, args.background)?);
+    let dataset = Arc::new(open_dataset(&args.dataset, args.images.background)?);
     // Staged beside the output folder and swapped in whole (scene::run_folder): a kill leaves
     // the previous refinement's files or this one's, and an unwritable place fails now.
     let outputs = RunFolder::begin(&args.out)
@@ -144,29 +140,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ..HullConfig::default()
         },
         strategy: args.strategy,
-        scale: args.scale,
+        scale: args.images.scale,
         select_scale: args.select_scale,
         iterations: args.iters,
         holdout: args.holdout.holdout(),
-        background: args.background,
+        background: args.images.background,
         seed: args.seed,
         label_pos_weight: args.label_pos_weight,
         backend: args.backend,
         ..RefineConfig::default()
     };
-    let job = refine_job(
-        dataset.clone(),
-        model.clone(),
-        config,
-        JobOptions::headless(args.threads),
-    );
-    let outcome = drive(job, "refinement", args.quiet, |_| {})?;
+    let job = refine_job(dataset.clone(), model.clone(), config, args.job.options());
+    let outcome = drive(job, "refinement", args.job.quiet, |_| {})?;
     write_outputs(
         outputs.staging(),
         &dataset,
         &model,
         &outcome,
-        args.scale,
+        args.images.scale,
         palette,
     )?;
     outputs
@@ -247,34 +238,4 @@ fn write_outputs(
         &out.join("metrics.json"),
         &serde_json::to_string_pretty(&metrics)?,
     )
-}
-
-/// The photo dimmed outside the hulls, with the hulls' edges in green: what a person checks.
-fn hull_picture(photo: &RgbImage, inside: &damage_twin::scene::Mask) -> RgbImage {
-    let (w, h) = (photo.width, photo.height);
-    let mut image = photo.clone();
-    for y in 0..h {
-        for x in 0..w {
-            let p = (y * w + x) as usize;
-            let rgb = &mut image.data[p * 3..p * 3 + 3];
-            if !inside.get(x, y) {
-                rgb.iter_mut().for_each(|v| *v *= 0.35);
-                continue;
-            }
-            let edge = [(-1i32, 0i32), (1, 0), (0, -1), (0, 1)]
-                .iter()
-                .any(|(dx, dy)| {
-                    let (nx, ny) = (x as i32 + dx, y as i32 + dy);
-                    nx < 0
-                        || ny < 0
-                        || nx >= w as i32
-                        || ny >= h as i32
-                        || !inside.get(nx as u32, ny as u32)
-                });
-            if edge {
-                rgb.copy_from_slice(&[0.0, 1.0, 0.0]);
-            }
-        }
-    }
-    image
 }

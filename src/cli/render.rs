@@ -6,16 +6,14 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use anyhow::bail;
-use glam::Vec3;
 
 use damage_twin::damage::Palette;
 use damage_twin::damage::display::{DisplayStyle, RenderRequest, render_job};
 use damage_twin::damage::evaluate::DamageReadout;
 use damage_twin::damage::layer::DamageLayer;
-use damage_twin::scene::ImageScale;
 use damage_twin::train::job::JobOptions;
 
-use super::args::{drive, open_dataset, parse_background, parse_scale, read_model};
+use super::args::{ImageArgs, drive, open_dataset, read_model};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -26,10 +24,8 @@ pub struct Args {
     pub view: String,
     #[arg(long)]
     pub out: PathBuf,
-    #[arg(long, default_value = "1", value_parser = parse_scale)]
-    pub scale: ImageScale,
-    #[arg(long, default_value = "black", value_parser = parse_background)]
-    pub background: Vec3,
+    #[command(flatten)]
+    pub images: ImageArgs,
     /// Draw the damage layer (class colours by label probability) over the photo-real render.
     #[arg(long)]
     pub damage_layer: bool,
@@ -47,7 +43,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let splats = Arc::new(read_model(&args.model)?);
-    let dataset = open_dataset(&args.dataset, args.background)?;
+    let dataset = open_dataset(&args.dataset, args.images.background)?;
     let Some(index) = dataset.view_index(&args.view) else {
         bail!(
             "no view named {:?} in {} (views are named like {})",
@@ -58,9 +54,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let view = &dataset.views[index];
     let k = &view.camera.intrinsics;
-    let (w, h) = args.scale.apply(k.width, k.height);
+    let (w, h) = args.images.scale.apply(k.width, k.height);
     let style = DisplayStyle {
-        background: args.background,
+        background: args.images.background,
         splat_scale: 1.0,
         damage: DamageLayer {
             enabled: args.damage_layer || args.damage_only,

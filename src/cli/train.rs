@@ -16,11 +16,10 @@ use damage_twin::damage::setup::{RunConfig, effective_mode, train_job};
 use damage_twin::metrics::peak_rss_mb;
 use damage_twin::scene::atomic::write_atomic;
 use damage_twin::scene::run_folder::RunFolder;
-use damage_twin::train::job::JobOptions;
 use damage_twin::train::trainer::StageTimes;
 use damage_twin::train::views::split_views;
 
-use super::args::{RunArgs, drive, open_dataset, palette};
+use super::args::{JobArgs, RunArgs, drive, open_dataset, palette};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -34,6 +33,8 @@ pub struct Args {
     pub iters: u32,
     #[command(flatten)]
     pub run: RunArgs,
+    #[command(flatten)]
+    pub job: JobArgs,
     /// Held-out PSNR is evaluated every this many steps for curve.csv (0: only at the end).
     #[arg(long, default_value_t = 500)]
     pub eval_every: u32,
@@ -53,9 +54,6 @@ pub struct Args {
     /// model is too rough for its error to be told from a photo's exposure).
     #[arg(long, default_value_t = 0)]
     pub appearance_from: u32,
-    /// No progress bar (log lines only).
-    #[arg(long)]
-    pub quiet: bool,
     /// Damage supervision: rgb, overlay (masks painted into the photos) or label (per-Gaussian
     /// damage channels). Damage modes fall back to rgb on a dataset without masks.
     #[arg(long, default_value = "label")]
@@ -115,7 +113,7 @@ fn write_text(path: &std::path::Path, text: &str) -> anyhow::Result<()> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let dataset = Arc::new(open_dataset(&args.dataset, args.run.background)?);
+    let dataset = Arc::new(open_dataset(&args.dataset, args.run.images.background)?);
     let holdout = args.run.holdout.holdout();
     let (train_idx, test_idx) = split_views(&dataset, &holdout).map_err(anyhow::Error::msg)?;
     // The run's files are staged beside the output folder and swapped in whole at the end
@@ -128,41 +126,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let config = RunConfig {
         mode: args.mode,
         palette,
-        scale: args.run.scale,
-        iterations: args.iters,
-        holdout,
-        sh_degree: args.run.sh_degree,
-        seed: args.run.seed,
-        background: args.run.background,
         label_weight: args.label_weight,
         label_geometry_until: args.label_geometry_until,
         label_pos_weight: args.label_pos_weight,
         label_lr: Some(args.label_lr),
-        random_points: args.run.init_points,
         eval_every: args.eval_every,
         max_gaussians: args.max_gaussians,
         budget: args.budget,
         contrasting_palette: args.colours.is_empty(),
-        backend: args.run.backend,
         appearance: args
             .appearance
             .then(|| damage_twin::train::appearance::AppearanceConfig {
                 start_step: args.appearance_from,
                 ..Default::default()
             }),
+        ..args.run.config(args.iters)
     };
     let mode = effective_mode(&dataset, args.mode);
-    let threads = args.run.threads.unwrap_or_else(rayon::current_num_threads);
-    let job = train_job(
-        dataset.clone(),
-        config,
-        JobOptions::headless(args.run.threads),
-    );
+    let threads = args.job.thread_count();
+    let job = train_job(dataset.clone(), config, args.job.options());
 
     // The learning curve, kept in memory and written with the other outputs at the end, so a
     // failed or killed run never leaves an emptied curve.csv behind.
     let mut curve = String::from("step,seconds,loss,gaussians,heldout_psnr\n");
-    let outcome = drive(job, "training", args.quiet, |p| {
+    let outcome = drive(job, "training", args.job.quiet, |p| {
         if p.psnr.is_some() || p.step % 10 == 0 || p.step == 1 {
             let psnr = p.psnr.map(|v| format!("{v:.3}")).unwrap_or_default();
             curve.push_str(&format!(
@@ -190,10 +177,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // held-out PSNR is the job's (in overlay mode against the photos with damage painted on).
     let request = |indices: &[usize], photometric: bool| EvalRequest {
         indices: indices.to_vec(),
-        scale: args.run.scale,
-        background: args.run.background,
+        scale: args.run.images.scale,
+        background: args.run.images.background,
         sh_degree: args.run.sh_degree,
         photometric,
+        half_appearance: false,
         readout: DamageReadout {
             mode,
             ..DamageReadout::for_model(&outcome.splats, palette)
@@ -212,7 +200,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &mut |_, _| {},
     )?;
 
-    let (width, height) = args.run.scale.apply(
+    let (width, height) = args.run.images.scale.apply(
         dataset.views[train_idx[0]].camera.intrinsics.width,
         dataset.views[train_idx[0]].camera.intrinsics.height,
     );

@@ -15,6 +15,7 @@ use crate::damage::reference::{load_reference_views, reference_source};
 use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
 use crate::scene::{Dataset, ImageScale, SceneError};
 use crate::splats::Splats;
+use crate::train::evaluate::{half_lit_psnr, view_quality};
 use crate::train::job::{Job, JobContext, JobError, JobOptions, Progress};
 use crate::train::views::load_views;
 
@@ -29,6 +30,10 @@ pub struct EvalRequest {
     pub sh_degree: u32,
     /// Score the photos (PSNR, SSIM); off when only damage is wanted.
     pub photometric: bool,
+    /// With `photometric`, also score each photo's right half after fitting its light to the
+    /// render on its left half (`train::evaluate::half_lit_psnr`, the NeRF-W protocol for a
+    /// model whose training photos differ in exposure).
+    pub half_appearance: bool,
     /// How rendered damage is read; RGB mode scores no damage.
     pub readout: DamageReadout,
 }
@@ -48,6 +53,9 @@ pub struct ModelScores {
     pub psnr: Option<f64>,
     pub ssim: Option<f64>,
     pub views: Vec<ViewScore>,
+    /// `half_appearance`: the mean PSNR of the views' right halves, light fitted on the left.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub psnr_half_appearance: Option<f64>,
     /// Rendered damage against the reference masks (None without masks, or in RGB mode).
     pub damage: Option<DamageFigures>,
     /// The folder the reference masks came from.
@@ -69,10 +77,14 @@ pub fn evaluate_model(
             RenderSettings::new(request.background, request.sh_degree.min(splats.sh_degree));
         let mut rasterizer = Rasterizer::new();
         let mut out = RenderOutput::default();
+        let mut half_total = 0.0;
         for (done, view) in views.iter().enumerate() {
             rasterizer.forward(splats, &view.camera, &settings, &mut out);
+            if request.half_appearance {
+                half_total += half_lit_psnr(&out.color, view);
+            }
             // Ignored pixels (the view's ignore mask) are not scored.
-            let (psnr, ssim) = crate::train::evaluate::view_quality(&out.color, view);
+            let (psnr, ssim) = view_quality(&out.color, view);
             scores.views.push(ViewScore {
                 name: view.name.clone(),
                 psnr,
@@ -83,6 +95,7 @@ pub fn evaluate_model(
         let n = scores.views.len() as f64;
         scores.psnr = Some(scores.views.iter().map(|v| v.psnr).sum::<f64>() / n);
         scores.ssim = Some(scores.views.iter().map(|v| v.ssim).sum::<f64>() / n);
+        scores.psnr_half_appearance = request.half_appearance.then(|| half_total / n);
     }
     if request.readout.mode != TrainMode::Rgb
         && !request.indices.is_empty()

@@ -106,6 +106,7 @@ pub fn heldout_psnr(
         background,
         sh_degree: splats.sh_degree,
         photometric: true,
+        half_appearance: false,
         readout: DamageReadout {
             mode: TrainMode::Rgb,
             ..DamageReadout::for_model(splats, Default::default())

@@ -4,10 +4,12 @@
 //! nothing of its own (`measure` splats labels straight onto a surface plane).
 
 pub mod assess;
+pub mod bake;
 pub mod bench;
 pub mod compact;
 pub mod display;
 pub mod evaluate;
+pub mod hull_picture;
 pub mod layer;
 pub mod measure;
 pub mod mode;

@@ -22,14 +22,22 @@ use crate::train::views::{Holdout, InitialModel, initial_splats, load_views, spl
 /// NeRF-synthetic; a few thousand converge faster on a CPU and densification adds the rest).
 const INTERACTIVE_RANDOM_POINTS: usize = 5_000;
 
+/// The scale a coarse twin trains at: a quarter of the 960×540 demo (240×135). At half size the
+/// CPU trainer managed about one step per second on a loaded 2-core machine beside the viewer
+/// (measured under Xvfb); a quarter is 4× cheaper and is the scale of docs/DAMAGE.md's figures.
+/// The viewer's training resolution and `twin new`'s default.
+pub const COARSE_SCALE: ImageScale = ImageScale::Factor(4);
+
 /// The few training settings the viewer exposes (its training panel; persisted with its
 /// settings). `RunConfig::interactive` turns them into a run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct TrainingSettings {
     pub iterations: u32,
-    /// Image downscale factor (1, 2, 4 or 8).
-    pub resolution_factor: u32,
+    /// The resolution training loads the photos at. Stored as the CLI spells it (`"4"`,
+    /// `"w960"`); settings stored before it was a scale held `resolution_factor: 4`.
+    #[serde(alias = "resolution_factor", with = "scale_text")]
+    pub scale: ImageScale,
     pub mode: TrainMode,
     /// Weight of the label BCE loss in label mode.
     pub label_weight: f32,
@@ -41,13 +49,55 @@ impl Default for TrainingSettings {
     fn default() -> Self {
         TrainingSettings {
             iterations: 3000,
-            // A quarter of the 960×540 demo (240×135): at half size the CPU trainer managed about
-            // one step per second on a loaded 2-core machine beside the viewer (measured under
-            // Xvfb); a quarter is 4× cheaper and is the scale of docs/DAMAGE.md's figures.
-            resolution_factor: 4,
+            scale: COARSE_SCALE,
             mode: TrainMode::Label,
             label_weight: RunConfig::default().label_weight,
             budget: None,
+        }
+    }
+}
+
+/// `TrainingSettings::scale` in a settings file: written as its CLI text, read from that text
+/// or from the bare factor older settings stored (`resolution_factor: 4`). A text that is no
+/// scale is refused; a factor that is none is read, and `Settings::sanitised` resets it.
+mod scale_text {
+    use serde::de::{Error, Unexpected, Visitor};
+    use serde::{Deserializer, Serializer};
+
+    use crate::scene::ImageScale;
+
+    pub fn serialize<S: Serializer>(scale: &ImageScale, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(scale)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<ImageScale, D::Error> {
+        d.deserialize_any(ScaleVisitor)
+    }
+
+    struct ScaleVisitor;
+
+    impl Visitor<'_> for ScaleVisitor {
+        type Value = ImageScale;
+
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("an image scale (1, 2, 4, 8 or w<width>)")
+        }
+
+        fn visit_u64<E: Error>(self, factor: u64) -> Result<ImageScale, E> {
+            u32::try_from(factor)
+                .ok()
+                .map(ImageScale::Factor)
+                .ok_or_else(|| E::invalid_value(Unexpected::Unsigned(factor), &self))
+        }
+
+        fn visit_i64<E: Error>(self, factor: i64) -> Result<ImageScale, E> {
+            u64::try_from(factor)
+                .map_err(|_| E::invalid_value(Unexpected::Signed(factor), &self))
+                .and_then(|f| self.visit_u64(f))
+        }
+
+        fn visit_str<E: Error>(self, text: &str) -> Result<ImageScale, E> {
+            ImageScale::parse(text).ok_or_else(|| E::invalid_value(Unexpected::Str(text), &self))
         }
     }
 }
@@ -136,7 +186,7 @@ impl RunConfig {
         RunConfig {
             mode: settings.mode,
             palette,
-            scale: ImageScale::Factor(settings.resolution_factor.max(1)),
+            scale: settings.scale,
             iterations: settings.iterations.max(1),
             holdout: Holdout::Auto { every: 8 },
             background: Vec3::from_array(background),
@@ -351,5 +401,28 @@ pub fn apply_mode(views: &mut [TrainView], mode: TrainMode, palette: &Palette) {
             TrainMode::Rgb => view.labels.clear(),
             TrainMode::Label => {}
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_training_scale_is_stored_as_text_and_read_from_an_older_factor() {
+        let settings = TrainingSettings {
+            scale: ImageScale::Width(960),
+            ..TrainingSettings::default()
+        };
+        let text = ron::to_string(&settings).expect("serialises");
+        assert!(text.contains("scale:\"w960\""), "{text}");
+        assert_eq!(
+            ron::from_str::<TrainingSettings>(&text).expect("parses"),
+            settings
+        );
+        let older: TrainingSettings =
+            ron::from_str("(iterations: 3000, resolution_factor: 2)").expect("parses");
+        assert_eq!(older.scale, ImageScale::Factor(2));
+        assert!(ron::from_str::<TrainingSettings>("(scale: \"3\")").is_err());
     }
 }

@@ -159,6 +159,23 @@ impl ImageScale {
         }
     }
 
+    /// The downscale factor (None for a target width).
+    pub fn factor(self) -> Option<u32> {
+        match self {
+            ImageScale::Factor(f) => Some(f),
+            ImageScale::Width(_) => None,
+        }
+    }
+
+    /// A scale `ImageScale::parse` accepts (a factor 1, 2, 4 or 8, or a width from 1 to
+    /// `limits::MAX_IMAGE_SIDE`): a file or a stored setting cannot ask for more than a user can.
+    pub fn is_valid(self) -> bool {
+        match self {
+            ImageScale::Factor(f) => [1, 2, 4, 8].contains(&f),
+            ImageScale::Width(w) => (1..=MAX_IMAGE_SIDE).contains(&w),
+        }
+    }
+
     /// Parses the CLI spelling: `1`, `2`, `4`, `8` (factors), `0.5`, `0.25`, `0.125`
     /// (fractions), or `w960` (a target width, 1 to `limits::MAX_IMAGE_SIDE`).
     pub fn parse(text: &str) -> Option<ImageScale> {
@@ -180,9 +197,30 @@ impl ImageScale {
     }
 }
 
+/// The CLI spelling `ImageScale::parse` reads back: `4` for a factor, `w960` for a width.
+impl std::fmt::Display for ImageScale {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ImageScale::Factor(factor) => write!(f, "{factor}"),
+            ImageScale::Width(width) => write!(f, "w{width}"),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scale_prints_as_it_parses() {
+        for text in ["1", "2", "4", "8", "w1", "w960"] {
+            let scale = ImageScale::parse(text).expect("parses");
+            assert_eq!(scale.to_string(), text);
+            assert!(scale.is_valid());
+        }
+        assert!(!ImageScale::Factor(3).is_valid());
+        assert!(!ImageScale::Width(0).is_valid());
+    }
 
     #[test]
     fn scale_parses_factors_fractions_and_widths() {

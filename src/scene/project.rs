@@ -120,7 +120,9 @@ impl ColourTransform {
 pub struct ProjectSettings {
     /// Background colour for rendering and for compositing RGBA images.
     pub background: [f32; 3],
-    /// The resolution images are trained at.
+    /// The resolution the project's surveys are worked at: the first survey's training scale
+    /// (`twin new --scale`, the app's training resolution), and the default of `twin update`
+    /// and `twin detect` and of the app's update and detection.
     pub scale: ImageScale,
     /// Colour of damage that appeared after an earlier survey.
     pub new_damage_colour: [u8; 3],
@@ -278,12 +280,7 @@ impl Project {
                 "settings.background {bg:?} is not a colour in [0, 1]"
             ));
         }
-        // The scales `ImageScale::parse` accepts: a file cannot ask for more than a user can.
-        let scale_ok = match self.settings.scale {
-            ImageScale::Factor(f) => [1, 2, 4, 8].contains(&f),
-            ImageScale::Width(w) => (1..=MAX_IMAGE_SIDE).contains(&w),
-        };
-        if !scale_ok {
+        if !self.settings.scale.is_valid() {
             return Err(format!(
                 "settings.scale {:?} is not a factor 1, 2, 4 or 8 or a width 1 to {MAX_IMAGE_SIDE}",
                 self.settings.scale

@@ -3,6 +3,7 @@
 
 pub mod init;
 pub mod model;
+pub mod random;
 pub mod selection;
 pub mod sh;
 

@@ -4,9 +4,9 @@
 //! then hold the scene's colour and each photo's light lives in its own six numbers, instead of
 //! the Gaussians averaging the exposures or baking them into view-dependent colour. A held-out
 //! photo has no fitted transform: the NeRF-W protocol fits one on half of it and scores the other
-//! half (`cli::eval --half-appearance`, docs/ROBUSTNESS.md). The model is the timeline's between
-//! surveys (`timeline::appearance`, fitted there in closed form), and the learnt transforms come
-//! out as the same `ColourTransform`.
+//! half (`damage::assess`'s `half_appearance`, `eval --half-appearance`, docs/ROBUSTNESS.md). The
+//! model is the timeline's between surveys (`timeline::appearance`), fitted in closed form by
+//! `train::light_fit`, and the learnt transforms come out as the same `ColourTransform`.
 
 use glam::Vec3;
 

@@ -1,12 +1,15 @@
 //! Image quality of a model over views: the held-out PSNR and SSIM that training reports and
-//! `eval` prints. Renders with the CPU rasterizer; reads no files.
+//! `eval` prints, and the NeRF-W half-photo PSNR. Renders with the CPU rasterizer; reads no
+//! files.
 
 use glam::Vec3;
 use serde::Serialize;
 
 use crate::metrics::{psnr, psnr_masked, ssim, ssim_masked};
 use crate::raster::{RasterBackend, Rasterizer, RenderOutput, RenderSettings};
+use crate::scene::RgbImage;
 use crate::splats::Splats;
+use crate::train::light_fit::fit_transform;
 use crate::train::spec::TrainView;
 
 /// Held-out image quality.
@@ -32,6 +35,26 @@ pub fn view_quality(rendered: &[f32], view: &TrainView) -> (f64, f64) {
             ssim(rendered, &view.image.data, w, h),
         ),
     }
+}
+
+/// The NeRF-W protocol for a model whose photos differ in exposure: the photo's light (a gain
+/// and offset per channel, `light_fit::fit_transform`) is fitted to the render on the left half
+/// of the view, applied to the render, and PSNR is taken over the right half (pixels the view's
+/// region uses only).
+pub fn half_lit_psnr(rendered: &[f32], view: &TrainView) -> f64 {
+    let (w, h) = (view.image.width as usize, view.image.height as usize);
+    let used = |p: usize| view.region.as_ref().is_none_or(|m| m.data[p] != 0);
+    let light = fit_transform(rendered, &view.image.data, &|p| p % w < w / 2 && used(p));
+    let mut lit = RgbImage {
+        width: view.image.width,
+        height: view.image.height,
+        data: rendered.to_vec(),
+    };
+    light.apply(&mut lit);
+    let right: Vec<u8> = (0..w * h)
+        .map(|p| u8::from(p % w >= w / 2 && used(p)))
+        .collect();
+    psnr_masked(&lit.data, &view.image.data, &right)
 }
 
 /// Renders every view and averages PSNR and SSIM.

@@ -6,6 +6,7 @@ use crate::app::panels::edit_settings;
 use crate::app::settings::TrainMode;
 use crate::app::state::AppState;
 use crate::app::training::{RunStatus, TrainingSession};
+use crate::scene::ImageScale;
 
 #[derive(Default)]
 pub struct TrainingPanel;
@@ -44,13 +45,14 @@ impl TrainingPanel {
                         ui.end_row();
                         ui.label("Resolution");
                         egui::ComboBox::from_id_salt("training-resolution")
-                            .selected_text(format!("1/{}", t.resolution_factor))
+                            .selected_text(resolution_label(t.scale))
                             .show_ui(ui, |ui| {
                                 for f in [1, 2, 4, 8] {
+                                    let scale = ImageScale::Factor(f);
                                     ui.selectable_value(
-                                        &mut t.resolution_factor,
-                                        f,
-                                        format!("1/{f}"),
+                                        &mut t.scale,
+                                        scale,
+                                        resolution_label(scale),
                                     );
                                 }
                             });
@@ -176,6 +178,15 @@ fn progress_text(session: &TrainingSession) -> String {
     match eta {
         Some(eta) => format!("{text} · ETA {}", format_duration(eta)),
         None => text,
+    }
+}
+
+/// A training scale as the panel names it: `1/4` for a factor, `960 px wide` for a width (a
+/// width comes only from a project or settings file; the list offers factors).
+fn resolution_label(scale: ImageScale) -> String {
+    match scale {
+        ImageScale::Factor(f) => format!("1/{f}"),
+        ImageScale::Width(w) => format!("{w} px wide"),
     }
 }
 

@@ -55,7 +55,7 @@ impl AppState {
             .collect();
         twin.project.settings = ProjectSettings {
             background: self.settings.background,
-            scale: crate::scene::ImageScale::Factor(self.settings.training.resolution_factor),
+            scale: self.settings.training.scale,
             ..twin.project.settings.clone()
         };
         let survey = twin.save_survey_model(dataset_root, splats)?;
@@ -67,7 +67,7 @@ impl AppState {
                 "iterations": outcome.steps,
                 "seconds": outcome.seconds,
                 "mode": self.settings.training.mode,
-                "resolution_factor": self.settings.training.resolution_factor,
+                "resolution_factor": self.settings.training.scale.factor(),
             });
             twin.save_metrics(&survey, &metrics)?;
             twin.save()?;

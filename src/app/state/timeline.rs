@@ -14,7 +14,7 @@ use crossbeam_channel::{Sender, TryRecvError};
 use super::{AppState, WorkerResult};
 use crate::damage::layer::{DamageLayer, survey_colours};
 use crate::damage::refine::Strategy;
-use crate::scene::{Dataset, ImageScale};
+use crate::scene::Dataset;
 use crate::splats::Splats;
 use crate::timeline::Twin;
 use crate::timeline::detect_survey::{
@@ -315,7 +315,10 @@ impl AppState {
         let job = detect_job(
             timeline.twin.clone(),
             name.clone(),
-            DetectOptions::default(),
+            DetectOptions {
+                scale: timeline.twin.project.settings.scale,
+                ..DetectOptions::default()
+            },
             JobOptions {
                 low_priority: true,
                 ..JobOptions::default()
@@ -354,7 +357,7 @@ impl AppState {
         let mut config = UpdateConfig::for_project(
             &timeline.twin,
             strategy,
-            ImageScale::Factor(1),
+            timeline.twin.project.settings.scale,
             iterations,
             true,
         );

@@ -32,6 +32,9 @@ pub struct BudgetArgs {
     pub iters: u32,
     #[command(flatten)]
     pub run: RunArgs,
+    /// Training threads (default: all cores, or RAYON_NUM_THREADS).
+    #[arg(long)]
+    pub threads: Option<usize>,
     /// `train --budget` runs, as fractions of the full run's final count.
     #[arg(long, value_delimiter = ',', default_value = "0.5,0.3")]
     pub budgets: Vec<f64>,
@@ -52,21 +55,21 @@ pub fn run(args: BudgetArgs) -> anyhow::Result<()> {
         write_budget_chart(&args.out, "budget-study", &file.rows)?;
         return Ok(());
     }
-    let dataset: Arc<Dataset> = Arc::new(open_dataset(&args.dataset, args.run.background)?);
+    let dataset: Arc<Dataset> = Arc::new(open_dataset(&args.dataset, args.run.images.background)?);
     let models_dir = args.out.join("models");
     std::fs::create_dir_all(&models_dir)
         .with_context(|| format!("creating {}", models_dir.display()))?;
-    let threads = args.run.threads.unwrap_or_else(rayon::current_num_threads);
+    let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
     let config = BudgetConfig {
         scene: args.scene.clone(),
         run: RunConfig {
             mode: TrainMode::Rgb,
-            scale: args.run.scale,
+            scale: args.run.images.scale,
             iterations: args.iters,
             holdout: args.run.holdout.holdout(),
             sh_degree: args.run.sh_degree,
             seed: args.run.seed,
-            background: args.run.background,
+            background: args.run.images.background,
             random_points: args.run.init_points,
             eval_every: 0,
             ..RunConfig::default()

@@ -5,11 +5,10 @@
 
 use std::path::PathBuf;
 
-use damage_twin::scene::ImageScale;
 use damage_twin::timeline::changes::OLD_DAMAGE_THRESHOLD;
 use damage_twin::timeline::detect_survey::{DetectOptions, detect_survey};
 
-use crate::cli::args::parse_scale;
+use crate::cli::args::ProjectScaleArgs;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -19,9 +18,9 @@ pub struct Args {
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
-    /// The resolution changes are found at (2: 480×270 of a 960×540 survey).
-    #[arg(long, default_value = "2", value_parser = parse_scale)]
-    pub scale: ImageScale,
+    // `--scale`: the resolution changes are found at.
+    #[command(flatten)]
+    pub scale: ProjectScaleArgs,
     /// New blobs lying wholly within this many pixels of old damage of their class are old
     /// damage seen shifted (misregistration, blur); growth reaching beyond is kept (0: off).
     #[arg(long, default_value_t = damage_twin::timeline::detect_survey::DEFAULT_BAND_PX)]
@@ -49,7 +48,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let mut twin = super::open(&args.dir)?;
     let options = DetectOptions {
-        scale: args.scale,
+        scale: args.scale.or_project(&twin),
         band_px: args.band,
         min_area_px: args.min_area,
         earlier: args.earlier,

@@ -7,14 +7,13 @@ use std::sync::Arc;
 
 use anyhow::Context;
 
-use damage_twin::damage::setup::{RunConfig, train_job};
+use damage_twin::damage::setup::{COARSE_SCALE, RunConfig, train_job};
 use damage_twin::scene::ImageScale;
 use damage_twin::timeline::Twin;
 use damage_twin::timeline::update::tag_damage;
 use damage_twin::train::history::History;
-use damage_twin::train::job::JobOptions;
 
-use crate::cli::args::{drive, open_dataset, parse_scale, read_model};
+use crate::cli::args::{JobArgs, drive, open_dataset, parse_scale, read_model};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -31,16 +30,16 @@ pub struct Args {
     /// The survey's model; without one, a model is trained.
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Training scale when no model is given (4: 240×135 of a 960×540 survey).
-    #[arg(long, default_value = "4", value_parser = parse_scale)]
+    /// The project's scale (`twin update` and `twin detect` work at it unless given
+    /// `--scale`), and the training scale when no model is given (4: 240×135 of a 960×540
+    /// survey).
+    #[arg(long, default_value_t = COARSE_SCALE, value_parser = parse_scale)]
     pub scale: ImageScale,
     /// Training iterations when no model is given.
     #[arg(long, default_value_t = 3000)]
     pub iters: u32,
-    #[arg(long)]
-    pub threads: Option<usize>,
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub job: JobArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -56,10 +55,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 iterations: args.iters,
                 ..RunConfig::default()
             };
-            let job = train_job(dataset, config, JobOptions::headless(args.threads));
+            let job = train_job(dataset, config, args.job.options());
             let started = std::time::Instant::now();
             let mut history = History::default();
-            let outcome = drive(job, "training", args.quiet, |p| {
+            let outcome = drive(job, "training", args.job.quiet, |p| {
                 history.record_progress(p, started.elapsed().as_secs_f64())
             })?;
             history.record_final(

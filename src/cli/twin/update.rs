@@ -5,12 +5,10 @@
 use std::path::PathBuf;
 
 use damage_twin::damage::refine::Strategy;
-use damage_twin::scene::ImageScale;
 use damage_twin::timeline::update::{UpdateConfig, update_project_job};
 use damage_twin::train::history::History;
-use damage_twin::train::job::JobOptions;
 
-use crate::cli::args::{drive, parse_scale};
+use crate::cli::args::{JobArgs, ProjectScaleArgs, drive};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -19,9 +17,9 @@ pub struct Args {
     pub survey: String,
     #[arg(long, default_value = "finetune")]
     pub strategy: Strategy,
-    /// The resolution the update trains at.
-    #[arg(long, default_value = "1", value_parser = parse_scale)]
-    pub scale: ImageScale,
+    // `--scale`: the resolution the update trains at.
+    #[command(flatten)]
+    pub scale: ProjectScaleArgs,
     #[arg(long, default_value_t = damage_twin::timeline::update::UPDATE_ITERATIONS)]
     pub iters: u32,
     /// Train on the photos as they are (no per-photo light compensation).
@@ -44,10 +42,8 @@ pub struct Args {
     /// The renderer that trains: cpu, gpu or auto (see `train --backend`).
     #[arg(long, default_value = "cpu")]
     pub backend: damage_twin::train::backend_choice::Backend,
-    #[arg(long)]
-    pub threads: Option<usize>,
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub job: JobArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -56,7 +52,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut config = UpdateConfig::for_project(
         &twin,
         args.strategy,
-        args.scale,
+        args.scale.or_project(&twin),
         args.iters,
         !args.no_appearance,
     );
@@ -70,15 +66,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.gentle_rates {
         config.refine.lr = damage_twin::timeline::update::gentle_learning_rates();
     }
-    let job = update_project_job(
-        twin,
-        args.survey.clone(),
-        config,
-        JobOptions::headless(args.threads),
-    );
+    let job = update_project_job(twin, args.survey.clone(), config, args.job.options());
     let started = std::time::Instant::now();
     let mut history = History::default();
-    let (twin, outcome) = drive(job, "update", args.quiet, |p| {
+    let (twin, outcome) = drive(job, "update", args.job.quiet, |p| {
         history.record_progress(p, started.elapsed().as_secs_f64())
     })?;
     outcome

@@ -62,6 +62,7 @@ pub fn run_hierarchy(
             background: config.run.background,
             sh_degree: splats.sh_degree,
             photometric: true,
+            half_appearance: false,
             readout: DamageReadout {
                 mode: config.run.mode,
                 ..DamageReadout::for_model(splats, config.run.palette)

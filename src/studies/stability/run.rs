@@ -48,6 +48,7 @@ pub fn stability_run(
             background: config.background,
             sh_degree: config.sh_degree,
             photometric: true,
+            half_appearance: false,
             readout,
         },
         &mut |_, _| {},
