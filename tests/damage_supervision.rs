@@ -66,7 +66,7 @@ fn train_and_score(config: &RunConfig) -> (Splats, Iou, Iou, Iou) {
         .expect("training finishes");
     let splats = (*outcome.splats).clone();
     let source = reference_source(dataset).expect("synth writes truth/");
-    assert!(source.dir().ends_with("truth/masks"));
+    assert!(source.masks().describe().ends_with("truth/masks"));
     let heldout =
         load_reference_views(dataset, &source, &heldout_indices, config.scale).expect("truth");
     let readout = DamageReadout {

@@ -320,7 +320,7 @@ fn the_viewer_selects_and_frames_a_measured_region() {
         camera_count: 1,
         camera_models: BTreeMap::new(),
         points: None,
-        masks_dir: None,
+        masks: None,
         mask_counts: BTreeMap::new(),
         background: [0.0; 3],
         warnings: Vec::new(),
