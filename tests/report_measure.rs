@@ -191,7 +191,11 @@ fn report_json_follows_its_documented_schema() {
         BTreeMap::new(),
         project_runs(
             "s1",
-            &serde_json::json!({"seconds": 12.0, "heldout_psnr": 24.5}),
+            &serde_json::from_value(serde_json::json!({
+                "seconds": 12.0, "heldout_psnr": 24.5, "heldout_ssim": null, "gaussians": 100,
+                "iterations": 500, "scale": {"Factor": 4},
+            }))
+            .unwrap(),
         ),
     );
     let json = serde_json::to_value(&report).unwrap();
