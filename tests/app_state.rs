@@ -78,7 +78,7 @@ fn dataset_with_views(root: &std::path::Path, n: usize) -> Dataset {
         camera_count: 1,
         camera_models: BTreeMap::new(),
         points: None,
-        masks_dir: None,
+        masks: None,
         mask_counts: BTreeMap::new(),
         background: [0.0; 3],
         warnings: Vec::new(),

@@ -220,7 +220,7 @@ fn dataset(root: &Path, image: &Path, camera_size: (u32, u32)) -> Dataset {
         camera_count: 1,
         camera_models: BTreeMap::new(),
         points: None,
-        masks_dir: Some(root.join("masks")),
+        masks: Some(damage_twin::scene::MaskFolder::shared(root.join("masks"))),
         mask_counts: BTreeMap::new(),
         background: [0.0; 3],
         warnings: Vec::new(),

@@ -191,7 +191,11 @@ fn report_json_follows_its_documented_schema() {
         BTreeMap::new(),
         project_runs(
             "s1",
-            &serde_json::json!({"seconds": 12.0, "heldout_psnr": 24.5}),
+            &serde_json::from_value(serde_json::json!({
+                "seconds": 12.0, "heldout_psnr": 24.5, "heldout_ssim": null, "gaussians": 100,
+                "iterations": 500, "scale": {"Factor": 4},
+            }))
+            .unwrap(),
         ),
     );
     let json = serde_json::to_value(&report).unwrap();
@@ -320,7 +324,7 @@ fn the_viewer_selects_and_frames_a_measured_region() {
         camera_count: 1,
         camera_models: BTreeMap::new(),
         points: None,
-        masks_dir: None,
+        masks: None,
         mask_counts: BTreeMap::new(),
         background: [0.0; 3],
         warnings: Vec::new(),

@@ -104,7 +104,7 @@ pub fn evaluate_model(
         let views = load_reference_views(dataset, &source, &request.indices, request.scale)?;
         let damage = evaluate_damage(splats, &views, &request.readout, request.background);
         scores.damage = Some(damage.figures());
-        scores.damage_reference = Some(source.dir().display().to_string());
+        scores.damage_reference = Some(source.masks().describe());
     }
     Ok(scores)
 }

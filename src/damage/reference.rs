@@ -1,41 +1,42 @@
 //! Reference masks for evaluating rendered damage: a synthetic survey's clean `truth/masks/` when
 //! the dataset has one (its `masks/` may be deliberately corrupted), else the dataset's own masks.
 
-use std::path::PathBuf;
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
 use crate::damage::DamageClass;
 use crate::damage::evaluate::ReferenceView;
-use crate::scene::{Dataset, ImageScale, SceneError};
+use crate::scene::{Dataset, ImageScale, MaskFolder, MaskSource, SceneError};
 
 /// Where reference masks come from.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug)]
 pub enum ReferenceSource {
     /// `<dataset>/truth/masks/` (written by `damage-twin synth`).
-    Truth(PathBuf),
-    /// The dataset's `masks/` folder.
-    DatasetMasks(PathBuf),
+    Truth(MaskFolder),
+    /// The dataset's own masks (`Dataset::masks`).
+    DatasetMasks(Arc<dyn MaskSource>),
 }
 
 impl ReferenceSource {
-    pub fn dir(&self) -> &std::path::Path {
+    pub fn masks(&self) -> &dyn MaskSource {
         match self {
-            ReferenceSource::Truth(dir) | ReferenceSource::DatasetMasks(dir) => dir,
+            ReferenceSource::Truth(folder) => folder,
+            ReferenceSource::DatasetMasks(source) => source.as_ref(),
         }
     }
 }
 
-/// The reference folder of `dataset`, or None when it has no masks at all.
+/// The reference masks of `dataset`, or None when it has no masks at all.
 pub fn reference_source(dataset: &Dataset) -> Option<ReferenceSource> {
-    let truth = dataset.root.join("truth").join("masks");
-    if truth.is_dir() {
+    let truth = MaskFolder::truth(&dataset.root);
+    if truth.is_available() {
         return Some(ReferenceSource::Truth(truth));
     }
     dataset
-        .masks_dir
+        .masks
         .clone()
-        .filter(|d| d.is_dir())
+        .filter(|m| m.is_available())
         .map(ReferenceSource::DatasetMasks)
 }
 
@@ -50,7 +51,7 @@ pub fn load_reference_views(
     indices
         .par_iter()
         .map(|&index| {
-            let (camera, mut masks) = dataset.load_view_masks(index, source.dir(), scale)?;
+            let (camera, mut masks) = dataset.load_view_masks(index, source.masks(), scale)?;
             Ok(ReferenceView {
                 name: dataset.views[index].name.clone(),
                 camera,

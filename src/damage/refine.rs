@@ -117,7 +117,7 @@ pub fn refine_from(
     let mode = config.select.mode;
     let (train_idx, heldout_idx) =
         split_views(dataset, &config.holdout).map_err(JobError::Invalid)?;
-    let masks_dir = dataset.masks_dir.clone().ok_or_else(|| {
+    let masks = dataset.masks.clone().ok_or_else(|| {
         JobError::Invalid(format!(
             "{} has no damage masks to select damage Gaussians with",
             dataset.root.display()
@@ -129,7 +129,7 @@ pub fn refine_from(
     let t = Instant::now();
     let selection = match &config.given {
         Some(given) => given_selection(model, given),
-        None => select_by_masks(ctx, dataset, model, config, &train_idx, &masks_dir)?,
+        None => select_by_masks(ctx, dataset, model, config, &train_idx, masks.as_ref())?,
     };
     let n = model.len();
     seconds.select = t.elapsed().as_secs_f64();

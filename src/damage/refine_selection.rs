@@ -48,7 +48,7 @@ pub(super) fn select_by_masks(
     model: &Splats,
     config: &RefineConfig,
     train_idx: &[usize],
-    masks_dir: &std::path::Path,
+    masks: &dyn crate::scene::MaskSource,
 ) -> Result<Selection, JobError> {
     ctx.log(format!(
         "selecting damage Gaussians among {} against {} views' masks",
@@ -58,7 +58,7 @@ pub(super) fn select_by_masks(
     let mask_views: Vec<MaskView> = train_idx
         .par_iter()
         .map(|&i| {
-            let (camera, mut masks) = dataset.load_view_masks(i, masks_dir, config.select_scale)?;
+            let (camera, mut masks) = dataset.load_view_masks(i, masks, config.select_scale)?;
             Ok(MaskView {
                 camera,
                 masks: DamageClass::ALL.iter().map(|c| masks.remove(c)).collect(),

@@ -7,9 +7,9 @@
 use std::collections::BTreeMap;
 
 use serde::Serialize;
-use serde_json::Value;
 
 use crate::report::tradeoff_chart::TradeoffPoint;
+use crate::timeline::record::{HeldoutScores, SurveyRecord};
 
 /// One mark: a survey's model at one step, its wall time and held-out scores on that survey's
 /// photos.
@@ -39,35 +39,36 @@ impl ProjectRun {
 
 /// The marks `metrics` (survey `survey`'s `metrics.json`) holds; none for metrics of another
 /// shape.
-pub fn project_runs(survey: &str, metrics: &Value) -> Vec<ProjectRun> {
-    let run = |step: &str, seconds: f64, scores: &Value, psnr_key: &str| ProjectRun {
-        survey: survey.to_string(),
-        step: step.to_string(),
-        seconds,
-        psnr: scores.get(psnr_key).and_then(Value::as_f64),
-        iou: scores
-            .get("iou")
-            .and_then(Value::as_object)
-            .map(|classes| {
-                classes
-                    .iter()
-                    .filter_map(|(class, v)| Some((class.clone(), v.as_f64()?)))
-                    .collect()
-            })
-            .unwrap_or_default(),
+pub fn project_runs(survey: &str, metrics: &SurveyRecord) -> Vec<ProjectRun> {
+    let run = |step: &str, seconds: f64, psnr: Option<f64>, iou: &BTreeMap<String, Option<f64>>| {
+        ProjectRun {
+            survey: survey.to_string(),
+            step: step.to_string(),
+            seconds,
+            psnr,
+            iou: iou
+                .iter()
+                .filter_map(|(class, v)| Some((class.clone(), (*v)?)))
+                .collect(),
+        }
     };
-    let Some(seconds) = metrics.get("seconds").and_then(Value::as_f64) else {
-        return Vec::new();
+    let scored = |step: &str, seconds: f64, scores: &HeldoutScores| {
+        run(step, seconds, scores.psnr, &scores.iou)
     };
-    match metrics.get("refine") {
-        Some(refine) => match (refine.get("before"), refine.get("after")) {
-            (Some(before), Some(after)) => vec![
-                run("before update", 0.0, before, "psnr"),
-                run("updated", seconds, after, "psnr"),
-            ],
-            _ => Vec::new(),
-        },
-        None => vec![run("trained", seconds, metrics, "heldout_psnr")],
+    match metrics {
+        SurveyRecord::Updated(update) => vec![
+            scored("before update", 0.0, &update.refine.before),
+            scored("updated", update.seconds, &update.refine.after),
+        ],
+        SurveyRecord::Trained(trained) => {
+            vec![run(
+                "trained",
+                trained.seconds,
+                trained.heldout_psnr,
+                &BTreeMap::new(),
+            )]
+        }
+        SurveyRecord::Other(_) => Vec::new(),
     }
 }
 
@@ -77,13 +78,15 @@ mod tests {
 
     #[test]
     fn an_update_gives_two_marks_and_a_training_one() {
-        let update = serde_json::json!({
+        let read =
+            |value: serde_json::Value| serde_json::from_value::<SurveyRecord>(value).unwrap();
+        let update = read(serde_json::json!({
             "seconds": 70.0,
             "refine": {
                 "before": {"iou": {"crack": 0.3, "rebar": 0.2}, "psnr": 19.5},
                 "after": {"iou": {"crack": 0.5, "rebar": 0.4}, "psnr": 20.1},
             }
-        });
+        }));
         let runs = project_runs("2025", &update);
         assert_eq!(runs.len(), 2);
         assert_eq!(
@@ -94,10 +97,13 @@ mod tests {
         assert_eq!(runs[1].psnr, Some(20.1));
         assert_eq!(runs[1].point().label, "2025 updated");
 
-        let trained = serde_json::json!({"seconds": 400.0, "heldout_psnr": 25.0, "gaussians": 9});
+        let trained = read(serde_json::json!({
+            "seconds": 400.0, "heldout_psnr": 25.0, "heldout_ssim": 0.8, "gaussians": 9,
+            "iterations": 3000, "scale": {"Factor": 4},
+        }));
         let runs = project_runs("2024", &trained);
         assert_eq!(runs.len(), 1);
         assert_eq!((runs[0].psnr, runs[0].iou.len()), (Some(25.0), 0));
-        assert!(project_runs("x", &serde_json::json!({"psnr": 30.0})).is_empty());
+        assert!(project_runs("x", &read(serde_json::json!({"psnr": 30.0}))).is_empty());
     }
 }

@@ -4,10 +4,12 @@
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use serde::Serialize;
 
 use crate::scene::DamageClass;
+use crate::scene::mask_source::MaskSource;
 use crate::scene::{Camera, Mask, PointCloud, RgbImage};
 
 /// Which reader recognised the dataset.
@@ -78,8 +80,9 @@ pub struct Dataset {
     pub camera_models: BTreeMap<String, usize>,
     /// Initial points (SfM points, or `ply_file_path` of nerfstudio), if the dataset has any.
     pub points: Option<PointCloud>,
-    /// `masks/` folder beside the images, when present.
-    pub masks_dir: Option<PathBuf>,
+    /// Where the views' damage and ignore masks come from (`masks/` beside the images, when
+    /// present: `MaskFolder`).
+    pub masks: Option<Arc<dyn MaskSource>>,
     /// Mask files found per class.
     pub mask_counts: BTreeMap<DamageClass, usize>,
     /// Colour RGBA images are composited on (NeRF-synthetic: white or black).
@@ -106,20 +109,14 @@ impl Dataset {
     pub fn ignore_mask_count(&self) -> usize {
         self.views
             .iter()
-            .filter(|v| self.ignore_mask_file(v).is_some())
+            .filter(|v| self.has_ignore_mask(v))
             .count()
     }
 
-    /// Where view `view`'s ignore mask is: the file the dataset names for it, else COLMAP's
-    /// `masks/<image file name>.png` when it exists.
-    pub fn ignore_mask_file(&self, view: &View) -> Option<PathBuf> {
-        match &view.ignore_mask {
-            Some(path) => Some(path.clone()),
-            None => {
-                let dir = self.masks_dir.as_ref()?;
-                crate::scene::masks::ignore_mask_path(dir, &view.name, &view.image_path)
-            }
-        }
+    /// Whether view `view` has an ignore mask: the file the dataset names for it, else one in
+    /// the mask source (COLMAP's `masks/<image file name>.png`).
+    pub fn has_ignore_mask(&self, view: &View) -> bool {
+        view.ignore_mask.is_some() || self.masks.as_ref().is_some_and(|m| m.has_ignore_mask(view))
     }
 
     /// The index of the view named `name`: its full name (`images/0049.jpg`'s stem path) or the

@@ -8,7 +8,8 @@ use std::path::Path;
 use crate::scene::DamageClass;
 use crate::scene::atomic::write_atomic;
 use crate::scene::limits::{MAX_IMAGE_SIDE, check_image_size};
-use crate::scene::masks::{read_ignore_mask, read_view_masks, resize_mask};
+use crate::scene::mask_source::MaskSource;
+use crate::scene::masks::{read_ignore_mask, resize_mask};
 use crate::scene::undistort::{undistort_mask, undistort_rgb};
 use crate::scene::{
     Camera, Dataset, Distortion, ImageScale, LoadedView, Mask, RgbImage, SceneError, View,
@@ -227,9 +228,9 @@ impl Dataset {
             image = undistort_rgb(&image, d, &camera.intrinsics);
         }
         let (width, height) = loaded_size(view, scale, stored)?;
-        let masks = match &self.masks_dir {
-            Some(dir) => read_masks_at(
-                dir,
+        let masks = match &self.masks {
+            Some(source) => read_masks_at(
+                source.as_ref(),
                 view,
                 stored,
                 &camera,
@@ -238,15 +239,9 @@ impl Dataset {
             )?,
             None => Default::default(),
         };
-        let ignore = match self.ignore_mask_file(view) {
-            Some(path) => Some(prepared_mask(
-                read_ignore_mask(&path, &view.image_path, stored)?,
-                &camera,
-                distortion.as_ref(),
-                (width, height),
-            )),
-            None => None,
-        };
+        let ignore = self
+            .read_ignore(view, stored)?
+            .map(|mask| prepared_mask(mask, &camera, distortion.as_ref(), (width, height)));
         Ok(LoadedView {
             name: view.name.clone(),
             camera: Camera::resized(&camera, width, height),
@@ -256,14 +251,15 @@ impl Dataset {
         })
     }
 
-    /// The damage masks of view `index` read from another mask folder (e.g. a synthetic survey's
-    /// clean `truth/masks/`), prepared exactly as `load_view` prepares the dataset's own: checked
-    /// against the stored image size, undistorted, resized to `scale`. Reads only the image's
-    /// header, not its pixels. Returns the camera at `scale` with them.
+    /// The damage masks of view `index` read from `source` (the dataset's own `masks`, or
+    /// another source such as a synthetic survey's clean `truth/masks/`), prepared exactly as
+    /// `load_view` prepares the dataset's own: checked against the stored image size,
+    /// undistorted, resized to `scale`. Reads only the image's header, not its pixels. Returns
+    /// the camera at `scale` with them.
     pub fn load_view_masks(
         &self,
         index: usize,
-        masks_dir: &Path,
+        source: &dyn MaskSource,
         scale: ImageScale,
     ) -> Result<(Camera, BTreeMap<DamageClass, Mask>), SceneError> {
         let view = self.view(index)?;
@@ -271,7 +267,7 @@ impl Dataset {
         let (camera, distortion) = stored_geometry(view, stored)?;
         let (width, height) = loaded_size(view, scale, stored)?;
         let masks = read_masks_at(
-            masks_dir,
+            source,
             view,
             stored,
             &camera,
@@ -289,19 +285,25 @@ impl Dataset {
         scale: ImageScale,
     ) -> Result<Option<Mask>, SceneError> {
         let view = self.view(index)?;
-        let Some(path) = self.ignore_mask_file(view) else {
+        if !self.has_ignore_mask(view) {
             return Ok(None);
-        };
+        }
         let stored = crate::scene::files::image_size(&view.image_path)?;
         let (camera, distortion) = stored_geometry(view, stored)?;
         let size = loaded_size(view, scale, stored)?;
-        let mask = read_ignore_mask(&path, &view.image_path, stored)?;
-        Ok(Some(prepared_mask(
-            mask,
-            &camera,
-            distortion.as_ref(),
-            size,
-        )))
+        Ok(self
+            .read_ignore(view, stored)?
+            .map(|mask| prepared_mask(mask, &camera, distortion.as_ref(), size)))
+    }
+
+    /// View `view`'s ignore mask at its stored size `stored`: the file the dataset names for it,
+    /// else the mask source's.
+    fn read_ignore(&self, view: &View, stored: (u32, u32)) -> Result<Option<Mask>, SceneError> {
+        match (&view.ignore_mask, &self.masks) {
+            (Some(path), _) => read_ignore_mask(path, &view.image_path, stored).map(Some),
+            (None, Some(source)) => source.ignore_mask(view, stored),
+            (None, None) => Ok(None),
+        }
     }
 
     /// View `index`'s camera at `scale`, as `load_view` would give it, from the image's header
@@ -366,23 +368,17 @@ pub(crate) fn stored_geometry(
     ))
 }
 
-/// The view's masks from `dir` at the stored image size, undistorted with the stored-size camera,
-/// then resized to `size`.
+/// The view's masks from `source` at the stored image size, undistorted with the stored-size
+/// camera, then resized to `size`.
 fn read_masks_at(
-    dir: &Path,
+    source: &dyn MaskSource,
     view: &View,
     stored: (u32, u32),
     camera: &Camera,
     distortion: Option<&Distortion>,
     size: (u32, u32),
 ) -> Result<BTreeMap<DamageClass, Mask>, SceneError> {
-    let masks = read_view_masks(
-        dir,
-        &view.name,
-        &view.image_path,
-        stored,
-        view.ignore_mask.as_deref(),
-    )?;
+    let masks = source.damage_masks(view, stored)?;
     Ok(masks
         .into_iter()
         .map(|(class, mask)| (class, prepared_mask(mask, camera, distortion, size)))

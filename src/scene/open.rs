@@ -5,6 +5,7 @@
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use crate::scene::colmap::{self, ColmapModel, ColmapPoint};
 use crate::scene::files::{EntryBudget, image_size, list_dir, walk_files};
@@ -12,7 +13,8 @@ use crate::scene::limits::{
     MAX_LISTED_ENTRIES, MAX_POINT_COORDINATE, MAX_VIEWS, check_image_size, is_usable_position,
 };
 use crate::scene::{
-    Camera, Dataset, DatasetFormat, Distortion, Intrinsics, PointCloud, SceneError, Split, View,
+    Camera, Dataset, DatasetFormat, Distortion, Intrinsics, MaskFolder, MaskSource, PointCloud,
+    SceneError, Split, View,
 };
 
 /// How a dataset is opened.
@@ -122,15 +124,18 @@ pub(crate) fn stem_of(path: &Path) -> String {
         .unwrap_or_default()
 }
 
-/// `masks/` beside the images and its per-class counts.
+/// `masks/` beside the images as the dataset's mask source, and its per-class counts.
 pub(crate) fn find_masks(
     root: &Path,
     budget: &mut EntryBudget,
-) -> (Option<PathBuf>, BTreeMap<crate::scene::DamageClass, usize>) {
+) -> (
+    Option<Arc<dyn MaskSource>>,
+    BTreeMap<crate::scene::DamageClass, usize>,
+) {
     let dir = root.join("masks");
     if dir.is_dir() {
         let counts = crate::scene::masks::count_masks_within(&dir, budget);
-        (Some(dir), counts)
+        (Some(MaskFolder::shared(dir)), counts)
     } else {
         (None, BTreeMap::new())
     }
@@ -315,7 +320,7 @@ fn open_colmap(
             &ids,
         ));
     }
-    let (masks_dir, mask_counts) = find_masks(root, &mut budget);
+    let (masks, mask_counts) = find_masks(root, &mut budget);
     warnings.extend(budget_warning(&budget));
     Ok(Dataset {
         root: root.to_path_buf(),
@@ -325,7 +330,7 @@ fn open_colmap(
         camera_count: model.cameras.len(),
         camera_models: count_models(model.cameras.iter().map(|c| c.model.name())),
         points,
-        masks_dir,
+        masks,
         mask_counts,
         background: options.background,
         warnings,

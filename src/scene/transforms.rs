@@ -204,7 +204,7 @@ pub fn open_transforms(root: &Path, options: &OpenOptions) -> Result<Dataset, Sc
         ));
     }
 
-    let (masks_dir, mask_counts) = find_masks(root, &mut budget);
+    let (masks, mask_counts) = find_masks(root, &mut budget);
     warnings.extend(budget_warning(&budget));
     Ok(Dataset {
         root: root.to_path_buf(),
@@ -214,7 +214,7 @@ pub fn open_transforms(root: &Path, options: &OpenOptions) -> Result<Dataset, Sc
         camera_count: cameras.len(),
         camera_models: count_models(cameras.iter().map(|(m, _)| m.as_str())),
         points,
-        masks_dir,
+        masks,
         mask_counts,
         background: options.background,
         warnings,

@@ -16,7 +16,7 @@ use crate::damage::evaluate::{DamageReadout, LABEL_THRESHOLD, predicted_masks_at
 use crate::metrics::MaskAgreement;
 use crate::raster::weight_lift::WeightLift;
 use crate::raster::{RenderSettings, render};
-use crate::scene::{Camera, Dataset, ImageScale, Mask, SceneError};
+use crate::scene::{Camera, Dataset, ImageScale, Mask, MaskFolder, MaskSource, SceneError};
 use crate::splats::Splats;
 use crate::timeline::earlier::{EarlierSurvey, surface_depth};
 
@@ -218,11 +218,11 @@ pub fn detect(
     earlier: Option<&EarlierSurvey>,
     on_view: &mut dyn FnMut(usize, usize),
 ) -> Result<Detection, SceneError> {
-    let masks_dir = dataset
-        .masks_dir
+    let masks = dataset
+        .masks
         .clone()
         .ok_or_else(|| SceneError::invalid(&dataset.root, "no damage masks to compare with"))?;
-    let truth_dir = dataset.root.join("truth").join("new-damage");
+    let truth_folder = MaskFolder::new(dataset.root.join("truth").join("new-damage"));
     let settings = RenderSettings::new(config.background, twin.sh_degree);
     let total = dataset.views.len();
     let mut views = Vec::with_capacity(total);
@@ -230,7 +230,8 @@ pub fn detect(
     let mut cameras: Vec<Camera> = Vec::with_capacity(total);
     let mut depths: Vec<Vec<f32>> = Vec::with_capacity(total);
     for index in 0..total {
-        let (camera, mut observed) = dataset.load_view_masks(index, &masks_dir, config.scale)?;
+        let (camera, mut observed) =
+            dataset.load_view_masks(index, masks.as_ref(), config.scale)?;
         let k = camera.intrinsics;
         let out = render(&without_near_floaters(twin, &camera), &camera, &settings);
         let old = predicted_masks_at(&out, &config.readout, config.old_threshold);
@@ -245,8 +246,8 @@ pub fn detect(
                     .unwrap_or_else(|| Mask::empty(k.width, k.height))
             })
             .collect();
-        truth.push(if truth_dir.is_dir() {
-            let (_, mut t) = dataset.load_view_masks(index, &truth_dir, config.scale)?;
+        truth.push(if truth_folder.is_available() {
+            let (_, mut t) = dataset.load_view_masks(index, &truth_folder, config.scale)?;
             Some(
                 DamageClass::ALL
                     .iter()

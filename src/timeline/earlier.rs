@@ -67,11 +67,11 @@ impl EarlierSurvey {
     ) -> Result<EarlierSurvey, SceneError> {
         let mut views = Vec::new();
         let radius_px = i64::from(radius_px);
-        let Some(masks_dir) = dataset.masks_dir.clone() else {
+        let Some(masks) = dataset.masks.clone() else {
             return Ok(EarlierSurvey { views, radius_px });
         };
         for index in 0..dataset.views.len() {
-            let (camera, mut found) = dataset.load_view_masks(index, &masks_dir, scale)?;
+            let (camera, mut found) = dataset.load_view_masks(index, masks.as_ref(), scale)?;
             if found.is_empty() {
                 continue;
             }

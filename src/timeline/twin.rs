@@ -12,6 +12,7 @@ use crate::scene::atomic::write_atomic;
 use crate::scene::project::{PROJECT_FILE, Project, Survey, SurveyError};
 use crate::scene::{SceneError, ply};
 use crate::splats::Splats;
+use crate::timeline::record::SurveyRecord;
 use crate::train::history::History;
 
 /// File names inside a survey's folder.
@@ -236,8 +237,9 @@ impl Twin {
         Ok(path)
     }
 
-    /// Survey `name`'s metrics, where recorded.
-    pub fn load_metrics(&self, name: &str) -> Result<Option<serde_json::Value>, TimelineError> {
+    /// Survey `name`'s metrics, where recorded (a file of no known shape reads as
+    /// `SurveyRecord::Other`).
+    pub fn load_metrics(&self, name: &str) -> Result<Option<SurveyRecord>, TimelineError> {
         let index = self.survey_index(name)?;
         match &self.project.surveys[index].metrics {
             Some(file) => read_json(&self.dir.join(file)).map(Some),
@@ -503,10 +505,10 @@ mod tests {
             Err(TimelineError::Exists { .. })
         ));
         assert_eq!(reopened.unused_name("survey-1"), "survey-1-2");
-        assert_eq!(
+        assert!(matches!(
             reopened.load_metrics("survey-2").unwrap(),
-            Some(serde_json::json!({"psnr": 30.0}))
-        );
+            Some(SurveyRecord::Other(_))
+        ));
         assert_eq!(reopened.load_metrics("survey-1").unwrap(), None);
 
         // Training histories: none until saved; a damaged file is an error naming it.

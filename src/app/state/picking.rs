@@ -138,7 +138,7 @@ impl AppState {
             self.log_line("snap to a survey view first: its mask is lifted to the Gaussians");
             return;
         };
-        let Some(masks_dir) = dataset.masks_dir.clone() else {
+        let Some(masks) = dataset.masks.clone() else {
             self.log_line("this dataset has no damage masks");
             return;
         };
@@ -146,9 +146,10 @@ impl AppState {
         let width = snap.camera.intrinsics.width;
         let scale = crate::scene::ImageScale::Width(width.min(960));
         let loaded = dataset
-            .load_view_masks(snap.view, &masks_dir, scale)
+            .load_view_masks(snap.view, masks.as_ref(), scale)
             .or_else(|_| {
-                dataset.load_view_masks(snap.view, &masks_dir, crate::scene::ImageScale::Factor(1))
+                let full = crate::scene::ImageScale::Factor(1);
+                dataset.load_view_masks(snap.view, masks.as_ref(), full)
             });
         let (camera, masks) = match loaded {
             Ok(loaded) => loaded,

@@ -8,6 +8,7 @@ use std::sync::Arc;
 use super::AppState;
 use crate::splats::Splats;
 use crate::timeline::Twin;
+use crate::timeline::record::record_training;
 
 impl AppState {
     pub(super) fn save_project(&mut self, dir: &Path) {
@@ -60,16 +61,8 @@ impl AppState {
         };
         let survey = twin.save_survey_model(dataset_root, splats)?;
         if let Some(outcome) = self.training.as_ref().and_then(|t| t.outcome.as_ref()) {
-            let metrics = serde_json::json!({
-                "heldout_psnr": outcome.heldout.as_ref().map(|s| s.psnr),
-                "heldout_ssim": outcome.heldout.as_ref().map(|s| s.ssim),
-                "gaussians": outcome.splats.len(),
-                "iterations": outcome.steps,
-                "seconds": outcome.seconds,
-                "mode": self.settings.training.mode,
-                "resolution_factor": self.settings.training.scale.factor(),
-            });
-            twin.save_metrics(&survey, &metrics)?;
+            let training = &self.settings.training;
+            record_training(&mut twin, &survey, outcome, training.mode, training.scale, None)?;
             twin.save()?;
         }
         Ok(())

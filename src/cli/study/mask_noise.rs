@@ -147,7 +147,6 @@ pub fn run(args: MaskNoiseArgs) -> anyhow::Result<()> {
         fine_iterations: args.fine_iters,
         fine_label_geometry_until: args.fine_label_geometry_until,
         fine_label_pos_weight: args.fine_label_pos_weight,
-        fine_work_dir: args.out.clone(),
     };
     let runs = args.rates.len() * args.modes.len();
     let bar = ProgressBar::new((runs as u64) * u64::from(args.iters)).with_style(

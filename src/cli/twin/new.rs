@@ -10,6 +10,7 @@ use anyhow::Context;
 use damage_twin::damage::setup::{COARSE_SCALE, RunConfig, train_job};
 use damage_twin::scene::ImageScale;
 use damage_twin::timeline::Twin;
+use damage_twin::timeline::record::record_training;
 use damage_twin::timeline::update::tag_damage;
 use damage_twin::train::history::History;
 
@@ -55,6 +56,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 iterations: args.iters,
                 ..RunConfig::default()
             };
+            let (mode, scale) = (config.mode, config.scale);
             let job = train_job(dataset, config, args.job.options());
             let started = std::time::Instant::now();
             let mut history = History::default();
@@ -65,16 +67,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 outcome.heldout.as_ref().map(|s| s.psnr),
                 started.elapsed().as_secs_f64(),
             );
-            twin.save_history(&args.survey, &history)?;
-            let metrics = serde_json::json!({
-                "heldout_psnr": outcome.heldout.as_ref().map(|s| s.psnr),
-                "heldout_ssim": outcome.heldout.as_ref().map(|s| s.ssim),
-                "gaussians": outcome.splats.len(),
-                "iterations": outcome.steps,
-                "seconds": outcome.seconds,
-                "scale": args.scale,
-            });
-            twin.save_metrics(&args.survey, &metrics)?;
+            record_training(
+                &mut twin,
+                &args.survey,
+                &outcome,
+                mode,
+                scale,
+                Some(&history),
+            )?;
             (*outcome.splats).clone()
         }
     };

@@ -6,7 +6,6 @@
 //! masks: errors corrected and introduced on the training views, IoU on training and held-out
 //! views.
 
-use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -16,7 +15,7 @@ use crate::damage::evaluate::{DamageReadout, evaluate_damage};
 use crate::damage::reference::{ReferenceSource, load_reference_views};
 use crate::damage::refine::{RefineConfig, Strategy, refine};
 use crate::damage::select::SelectConfig;
-use crate::scene::{Dataset, ImageScale, Mask};
+use crate::scene::{Dataset, ImageScale, InMemoryMasks, Mask};
 use crate::splats::Splats;
 use crate::studies::mask_noise::clean::{corrupt, load_clean_training};
 use crate::studies::mask_noise::rows::{StudyConfig, StudyRow, StudyStage};
@@ -29,8 +28,8 @@ use crate::train::job::{Job, JobOptions};
 const FINE_SCALE: ImageScale = ImageScale::Factor(1);
 
 /// The label-mode coarse twin `coarse`, trained on masks corrupted at `rate`, refined at full
-/// resolution for `config.fine_iterations` steps and scored. The corrupted full-resolution
-/// masks are written under `config.fine_work_dir` for the refinement to read, and removed after.
+/// resolution for `config.fine_iterations` steps and scored. The refinement reads the corrupted
+/// full-resolution masks from memory (`scene::InMemoryMasks`).
 /// `clean_twin`: the fine-tuned clean-mask twin's masks on the training views, for the rows'
 /// `clean_twin_corrected`. Returns the rows and this twin's masks on the training views.
 pub(crate) fn fine_rows(
@@ -51,28 +50,24 @@ pub(crate) fn fine_rows(
     // Another draw of the same noise model: the photos' masks, not the coarse ones upsampled.
     let (noisy, corrupted) = corrupt(&clean, config.noise, rate, config.noise_seed ^ 0xF1E);
 
-    let masks_dir = config.fine_work_dir.join(format!("masks-rate-{rate:.2}"));
-    let written = (|| {
-        for (view, masks) in clean.views.iter().zip(&corrupted) {
-            write_view_masks(&masks_dir, &view.name, masks.iter().map(Some))?;
+    // The refinement reads these masks where it reads a dataset's own: selection and the
+    // fine-tune's label targets.
+    let mut masks = InMemoryMasks::default();
+    for (view, corrupted) in clean.views.iter().zip(&corrupted) {
+        for (&class, mask) in DamageClass::ALL.iter().zip(corrupted) {
+            masks.insert_damage(&view.name, class, mask.clone());
         }
-        // Held-out views keep their clean masks: the refinement scores itself on them.
-        for view in &heldout {
-            write_view_masks(
-                &masks_dir,
-                &view.name,
-                view.reference.iter().map(Option::as_ref),
-            )?;
+    }
+    // Held-out views keep their clean masks: the refinement scores itself on them.
+    for view in &heldout {
+        for (&class, mask) in DamageClass::ALL.iter().zip(&view.reference) {
+            if let Some(mask) = mask {
+                masks.insert_damage(&view.name, class, mask.clone());
+            }
         }
-        Ok::<(), String>(())
-    })();
-    if let Err(error) = written {
-        // Best effort: the error above is the one to report.
-        let _ = std::fs::remove_dir_all(&masks_dir);
-        return Err(error);
     }
     let mut fine_dataset = dataset.clone();
-    fine_dataset.masks_dir = Some(masks_dir.clone());
+    fine_dataset.masks = Some(Arc::new(masks));
 
     let refine_config = RefineConfig {
         select: SelectConfig {
@@ -96,10 +91,9 @@ pub(crate) fn fine_rows(
     let job = Job::spawn("refine", JobOptions::headless(config.threads), move |ctx| {
         refine(ctx, &dataset_arc, &model, &refine_config)
     });
-    let outcome = job.wait();
-    let removed = std::fs::remove_dir_all(&masks_dir);
-    let outcome = outcome.map_err(|e| format!("full-resolution fine-tune at rate {rate}: {e}"))?;
-    removed.map_err(|e| format!("{}: {e}", masks_dir.display()))?;
+    let outcome = job
+        .wait()
+        .map_err(|e| format!("full-resolution fine-tune at rate {rate}: {e}"))?;
     let refined = &outcome.splats;
 
     let readout = DamageReadout {
@@ -140,29 +134,4 @@ pub(crate) fn fine_rows(
         row.stage = StudyStage::Finetune;
     }
     Ok((rows, training.predicted))
-}
-
-/// A view's masks (`DamageClass::ALL` order; None: no mask of that class) as
-/// `dir/<class>/<name>.png`, 0 / 255 grey.
-fn write_view_masks<'a>(
-    dir: &Path,
-    name: &str,
-    masks: impl Iterator<Item = Option<&'a Mask>>,
-) -> Result<(), String> {
-    for (class, mask) in DamageClass::ALL.iter().zip(masks) {
-        let Some(mask) = mask else { continue };
-        let folder: PathBuf = dir.join(class.id());
-        std::fs::create_dir_all(&folder).map_err(|e| format!("{}: {e}", folder.display()))?;
-        let path = folder.join(format!("{name}.png"));
-        let grey: Vec<u8> = mask
-            .data
-            .iter()
-            .map(|&v| if v != 0 { 255 } else { 0 })
-            .collect();
-        image::GrayImage::from_raw(mask.width, mask.height, grey)
-            .ok_or_else(|| format!("{}: mask size mismatch", path.display()))?
-            .save(&path)
-            .map_err(|e| format!("{}: {e}", path.display()))?;
-    }
-    Ok(())
 }

@@ -70,8 +70,6 @@ pub struct StudyConfig {
     /// Weight of damage pixels in the fine-tune's label cross-entropy
     /// (`RefineConfig::label_pos_weight`).
     pub fine_label_pos_weight: f32,
-    /// Where the fine-tune's corrupted full-resolution masks are written while it runs.
-    pub fine_work_dir: std::path::PathBuf,
 }
 
 /// One (mode, rate, class) result.
