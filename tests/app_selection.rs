@@ -337,8 +337,8 @@ fn selection_and_hidden_bits_survive_a_ply_save_and_reload() {
     s.meta.state[7] |= SELECTED | HIDDEN;
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("model.ply");
-    damage_twin::scene::ply::write_splats(&path, &s).unwrap();
-    let back = damage_twin::scene::ply::read_splats(&path).unwrap();
+    damage_twin::splats::ply::write_splats(&path, &s).unwrap();
+    let back = damage_twin::splats::ply::read_splats(&path).unwrap();
     assert_eq!(back.meta.state, s.meta.state);
 }
 
@@ -414,8 +414,8 @@ fn damage_selection_and_hand_labels_undo_and_save() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("model.ply");
     let model = state.splats.as_ref().unwrap();
-    damage_twin::scene::ply::write_splats(&path, model).unwrap();
-    let back = damage_twin::scene::ply::read_splats(&path).unwrap();
+    damage_twin::splats::ply::write_splats(&path, model).unwrap();
+    let back = damage_twin::splats::ply::read_splats(&path).unwrap();
     assert_eq!(back.raw_labels, model.raw_labels);
 }
 

@@ -6,12 +6,13 @@ use std::collections::BTreeMap;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 
-use damage_twin::scene::ply::{read_point_cloud, read_splats, write_splats};
+use damage_twin::scene::ply::read_point_cloud;
 use damage_twin::scene::project::{PROJECT_FILE, PROJECT_FORMAT_VERSION, Project, Survey};
 use damage_twin::scene::{
     Camera, Dataset, DatasetFormat, ImageScale, Intrinsics, SceneError, Split, View,
 };
 use damage_twin::splats::Splats;
+use damage_twin::splats::ply::{read_splats, write_splats};
 use glam::{Quat, Vec3};
 
 /// Runs `f`, asserting it returns an error (not a panic) whose message contains every `needle`.

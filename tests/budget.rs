@@ -98,7 +98,7 @@ fn budgeted_training_and_compact_keep_their_counts() {
     assert_eq!(report["gaussians_after"].as_u64(), Some(150));
     let psnr = report["psnr_after"].as_f64().expect("psnr_after");
     assert!(psnr.is_finite() && psnr > 5.0, "held-out PSNR {psnr}");
-    let written = damage_twin::scene::ply::read_splats(&out).expect("the compacted model reads");
+    let written = damage_twin::splats::ply::read_splats(&out).expect("the compacted model reads");
     assert_eq!(written.len(), 150);
 
     let refused = binary(&["train", data, "--out", "unused", "--budget", "0.5"]);

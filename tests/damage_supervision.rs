@@ -110,7 +110,7 @@ fn label_mode_learns_the_damage_on_held_out_views() {
     // The CLI reads the same figures back from the saved model.
     let dir = tempfile::tempdir().expect("temp dir");
     let model = dir.path().join("model.ply");
-    damage_twin::scene::ply::write_splats(&model, &splats).expect("model saves");
+    damage_twin::splats::ply::write_splats(&model, &splats).expect("model saves");
     let output = std::process::Command::new(env!("CARGO_BIN_EXE_damage-twin"))
         .arg("eval")
         .arg(&model)

@@ -125,7 +125,7 @@ fn model_file(dir: &Path) -> PathBuf {
         0,
     );
     let path = dir.join("model.ply");
-    damage_twin::scene::ply::write_splats(&path, &splats).unwrap();
+    damage_twin::splats::ply::write_splats(&path, &splats).unwrap();
     path
 }
 
@@ -374,7 +374,8 @@ fn an_initial_point_count_beyond_the_limit_is_refused() {
 fn named_pipes_and_folders_are_refused_at_once_wherever_a_file_is_read() {
     use damage_twin::scene::load::load_image;
     use damage_twin::scene::masks::{default_palette, read_binary_mask, read_colour_mask};
-    use damage_twin::scene::ply::{read_point_cloud, read_splats};
+    use damage_twin::scene::ply::read_point_cloud;
+    use damage_twin::splats::ply::read_splats;
 
     let tmp = tempdir();
     let dir = tmp.path().to_path_buf();

@@ -53,7 +53,7 @@ fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
 fn consistent_run(dir: &Path) -> u64 {
     let metrics: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).unwrap()).unwrap();
-    let model = damage_twin::scene::ply::read_splats(&dir.join("model.ply")).unwrap();
+    let model = damage_twin::splats::ply::read_splats(&dir.join("model.ply")).unwrap();
     assert_eq!(metrics["gaussians"].as_u64(), Some(model.len() as u64));
     let iterations = metrics["iterations"].as_u64().unwrap();
     let curve = std::fs::read_to_string(dir.join("curve.csv")).unwrap();

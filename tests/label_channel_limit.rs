@@ -19,7 +19,7 @@ fn model_with_labels(dir: &Path, labels: usize) -> PathBuf {
         .collect::<Vec<_>>();
     names.extend(["scale_0", "scale_1", "scale_2"].map(String::from));
     names.extend(["rot_0", "rot_1", "rot_2", "rot_3"].map(String::from));
-    names.extend((0..labels).map(damage_twin::scene::ply::label_property));
+    names.extend((0..labels).map(damage_twin::splats::ply::label_property));
     for name in &names {
         header.push_str(&format!("property float {name}\n"));
     }
@@ -64,11 +64,11 @@ fn assert_refused(output: std::process::Output, model: &Path) {
 fn too_many_label_channels_are_refused_naming_the_file() {
     let dir = tempfile::tempdir().expect("temp dir");
     let ok = model_with_labels(dir.path(), MAX_LABEL_CHANNELS);
-    let splats = damage_twin::scene::ply::read_splats(&ok).expect("at the limit reads");
+    let splats = damage_twin::splats::ply::read_splats(&ok).expect("at the limit reads");
     assert_eq!(splats.label_channels, MAX_LABEL_CHANNELS);
 
     let bad = model_with_labels(dir.path(), 17);
-    let err = damage_twin::scene::ply::read_splats(&bad)
+    let err = damage_twin::splats::ply::read_splats(&bad)
         .expect_err("17 label channels are refused")
         .to_string();
     assert!(

@@ -5,9 +5,10 @@
 use std::path::Path;
 
 use damage_twin::scene::PointCloud;
-use damage_twin::scene::ply::{read_point_cloud, read_splats, write_point_cloud, write_splats};
+use damage_twin::scene::ply::{read_point_cloud, write_point_cloud};
 use damage_twin::splats::Splats;
 use damage_twin::splats::model::OverlayColours;
+use damage_twin::splats::ply::{read_splats, write_splats};
 use glam::{Quat, Vec3};
 
 /// Deterministic pseudo-random splats with awkward values (negative zero, subnormals, huge).

@@ -10,13 +10,13 @@ use std::process::{Command, Output};
 
 use damage_twin::raster::{RenderSettings, render};
 use damage_twin::scene::open::OpenOptions;
-use damage_twin::scene::ply::{read_splats, write_splats};
-use damage_twin::scene::spz::read_spz;
 use damage_twin::scene::{DamageClass, Dataset, ImageScale};
 use damage_twin::splats::Splats;
 use damage_twin::splats::model::sigmoid;
 use damage_twin::splats::model::state::DELETED;
+use damage_twin::splats::ply::{read_splats, write_splats};
 use damage_twin::splats::sh::SH_C0;
+use damage_twin::splats::spz::read_spz;
 use glam::{Quat, Vec3};
 
 fn lund() -> PathBuf {

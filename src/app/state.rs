@@ -388,7 +388,7 @@ impl AppState {
             }
             Command::ExportPly(path) => match &self.splats {
                 Some(splats) => {
-                    let result = crate::scene::ply::write_splats(&path, splats);
+                    let result = crate::splats::ply::write_splats(&path, splats);
                     self.report(
                         result.map_err(Into::into),
                         &format!("exported {}", path.display()),

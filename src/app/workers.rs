@@ -13,8 +13,9 @@ use crate::app::files::{self, OpenTarget};
 use crate::app::settings::Settings;
 use crate::app::state::{LoadedSurvey, WorkerResult};
 use crate::scene::open::OpenOptions;
-use crate::scene::{Camera, Dataset, ImageScale, ply};
+use crate::scene::{Camera, Dataset, ImageScale};
 use crate::splats::Splats;
+use crate::splats::ply;
 use crate::timeline::Twin;
 
 /// Longest side of a comparison photo: enough for a viewport, cheap to upload.

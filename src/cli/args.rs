@@ -191,7 +191,7 @@ pub fn open_dataset(path: &Path, background: Vec3) -> anyhow::Result<Dataset> {
 
 /// Reads a model PLY.
 pub fn read_model(path: &Path) -> anyhow::Result<damage_twin::splats::Splats> {
-    damage_twin::scene::ply::read_splats(path)
+    damage_twin::splats::ply::read_splats(path)
         .with_context(|| format!("reading model {}", path.display()))
 }
 

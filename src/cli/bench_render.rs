@@ -51,7 +51,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         (Some(_), _) => (None, "random".to_string(), args.dataset.clone()),
         (None, Some(model)) => {
-            let s = damage_twin::scene::ply::read_splats(model)
+            let s = damage_twin::splats::ply::read_splats(model)
                 .with_context(|| format!("reading model {}", model.display()))?;
             (Some(s), model.display().to_string(), args.dataset.clone())
         }

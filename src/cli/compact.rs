@@ -151,7 +151,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let splats = compacted.splats;
     let psnr_after = psnr(&splats)?;
 
-    damage_twin::scene::ply::write_splats(&args.out, &splats)
+    damage_twin::splats::ply::write_splats(&args.out, &splats)
         .with_context(|| format!("writing {}", args.out.display()))?;
     let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
     let report = Report {

@@ -108,7 +108,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     // 3. Model, renders, metrics, charts.
     let model_path = args.out.join("model.ply");
-    damage_twin::scene::ply::write_splats(&model_path, &outcome.splats)
+    damage_twin::splats::ply::write_splats(&model_path, &outcome.splats)
         .with_context(|| format!("writing {}", model_path.display()))?;
     let renders = write_renders(&args.out, &dataset, &outcome.splats, args.renders)?;
     let charts = write_training_charts(&args.out, &history)?;

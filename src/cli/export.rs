@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 
 use damage_twin::damage::bake::bake_damage_colours;
-use damage_twin::scene::ply::{splats_file_bytes, write_splats};
-use damage_twin::scene::spz::{SpzOptions, SpzVersion, write_spz};
 use damage_twin::splats::model::state::DELETED;
+use damage_twin::splats::ply::{splats_file_bytes, write_splats};
+use damage_twin::splats::spz::{SpzOptions, SpzVersion, write_spz};
 
 use super::args::read_model;
 

@@ -227,7 +227,7 @@ fn write_outputs(
         &serde_json::to_string_pretty(&selection)?,
     )?;
     let model_path = out.join("model.ply");
-    damage_twin::scene::ply::write_splats(&model_path, &outcome.splats)
+    damage_twin::splats::ply::write_splats(&model_path, &outcome.splats)
         .with_context(|| format!("writing {}", model_path.display()))?;
     let metrics = MetricsFile {
         psnr_outside_hulls_before: report.before.psnr_outside_hulls,

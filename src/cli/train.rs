@@ -237,7 +237,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     // The model first, the metrics last: metrics.json always describes the model beside it.
     let model_path = args.out.join("model.ply");
-    damage_twin::scene::ply::write_splats(&outputs.path("model.ply"), &outcome.splats)
+    damage_twin::splats::ply::write_splats(&outputs.path("model.ply"), &outcome.splats)
         .with_context(|| format!("writing {}", model_path.display()))?;
     write_text(&outputs.path("curve.csv"), &curve)?;
     if !outcome.appearance.is_empty() {

@@ -18,7 +18,6 @@ pub mod ply;
 pub mod points;
 pub mod project;
 pub mod run_folder;
-pub mod spz;
 pub mod transforms;
 pub mod undistort;
 

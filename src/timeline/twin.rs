@@ -8,10 +8,11 @@ use std::path::{Component, Path, PathBuf};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
+use crate::scene::SceneError;
 use crate::scene::atomic::write_atomic;
 use crate::scene::project::{PROJECT_FILE, Project, Survey, SurveyError};
-use crate::scene::{SceneError, ply};
 use crate::splats::Splats;
+use crate::splats::ply;
 use crate::timeline::record::SurveyRecord;
 use crate::train::history::History;
 

@@ -8,12 +8,11 @@ use damage_twin::scene::colmap::{
     self, CameraModel, ColmapCamera, ColmapImage, ColmapModel, ColmapPoint,
 };
 use damage_twin::scene::open::OpenOptions;
-use damage_twin::scene::ply::{
-    read_point_cloud, read_point_cloud_skipping, read_splats, write_point_cloud, write_splats,
-};
+use damage_twin::scene::ply::{read_point_cloud, read_point_cloud_skipping, write_point_cloud};
 use damage_twin::scene::project::{PROJECT_FILE, Project, Survey};
 use damage_twin::scene::{Dataset, ImageScale, PointCloud, SceneError};
 use damage_twin::splats::Splats;
+use damage_twin::splats::ply::{read_splats, write_splats};
 use glam::{Quat, Vec3};
 
 use super::mutate::Content;
@@ -376,7 +375,7 @@ pub fn ply_splats_target() -> Target {
 /// decompressed payload, which the case gzips before decoding so that header lies, short
 /// attribute blocks and odd values reach the decoder itself.
 pub fn spz_target() -> Target {
-    use damage_twin::scene::spz::{SpzOptions, SpzVersion, read_spz, write_spz};
+    use damage_twin::splats::spz::{SpzOptions, SpzVersion, read_spz, write_spz};
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path();
     let mut splats = Splats::empty(2, 0);
@@ -425,7 +424,7 @@ pub fn spz_target() -> Target {
                 mutated.to_path_buf()
             };
             read_spz(&path).map(drop).map_err(|e| match e {
-                damage_twin::scene::spz::SpzError::File(e) => e,
+                damage_twin::splats::spz::SpzError::File(e) => e,
                 other => SceneError::invalid(mutated, other.to_string()),
             })
         },

@@ -62,7 +62,14 @@ impl AppState {
         let survey = twin.save_survey_model(dataset_root, splats)?;
         if let Some(outcome) = self.training.as_ref().and_then(|t| t.outcome.as_ref()) {
             let training = &self.settings.training;
-            record_training(&mut twin, &survey, outcome, training.mode, training.scale, None)?;
+            record_training(
+                &mut twin,
+                &survey,
+                outcome,
+                training.mode,
+                training.scale,
+                None,
+            )?;
             twin.save()?;
         }
         Ok(())

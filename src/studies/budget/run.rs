@@ -64,7 +64,7 @@ fn save(dir: &Path, name: &str, splats: &Splats) -> Result<u64, SceneError> {
         .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
         .collect();
     let path = dir.join(format!("{file}.ply"));
-    crate::scene::ply::write_splats(&path, splats)?;
+    crate::splats::ply::write_splats(&path, splats)?;
     std::fs::metadata(&path)
         .map(|m| m.len())
         .map_err(|e| SceneError::io(&path, e))

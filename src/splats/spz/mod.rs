@@ -560,5 +560,4 @@ fn unpack_smallest_three(mut packed: u32) -> Quat {
 }
 
 #[cfg(test)]
-#[path = "spz_tests.rs"]
 mod tests;

@@ -1,4 +1,4 @@
-//! Unit tests of `scene::spz` (kept apart: the codec alone is ~560 lines).
+//! Unit tests of `splats::spz` (kept apart: the codec alone is ~560 lines).
 
 use super::*;
 use crate::splats::sh::sh_basis;
