@@ -1,5 +1,5 @@
 //! `damage-twin export MODEL.ply --out FILE [--format ply|spz]`: writes a model for other
-//! viewers, as SPZ (Niantic's compressed format, `scene::spz`) or as our 3DGS PLY, and prints
+//! viewers, as SPZ (Niantic's compressed format, `splats::spz`) or as our 3DGS PLY, and prints
 //! its size per Gaussian beside the size of the same model as PLY. Soft-deleted Gaussians are
 //! left out (no other viewer knows the state bit). SPZ has no place for damage label channels:
 //! `--damage-colours` bakes the class colours into the Gaussians' colours instead.
