@@ -14,6 +14,7 @@ use damage_twin::damage::Palette;
 use damage_twin::damage::setup::RunConfig;
 use damage_twin::scene::open::OpenOptions;
 use damage_twin::scene::{Dataset, ImageScale};
+use damage_twin::timeline::lock::Writer;
 use damage_twin::train::backend_choice::Backend;
 use damage_twin::train::job::{Job, JobEvent, JobOptions, Progress};
 use damage_twin::train::views::Holdout;
@@ -106,6 +107,33 @@ impl ProjectScaleArgs {
     /// `--scale`, else the project's.
     pub fn or_project(&self, twin: &damage_twin::timeline::Twin) -> ImageScale {
         self.scale.unwrap_or(twin.project.settings.scale)
+    }
+}
+
+/// How a command that writes a twin project waits for another writer (`timeline::lock`).
+#[derive(clap::Args, Debug)]
+pub struct LockArgs {
+    /// Seconds to wait while another command writes the project before giving up (0: refuse at
+    /// once).
+    #[arg(long, default_value = "30", value_parser = parse_lock_wait)]
+    pub lock_wait: Duration,
+}
+
+impl LockArgs {
+    /// This process as the project's writer, named `command` to other writers; told on stderr
+    /// when it has to wait.
+    pub fn writer(&self, command: &str) -> Writer {
+        Writer::new(command)
+            .waiting(self.lock_wait)
+            .telling(|message| eprintln!("{message}"))
+    }
+}
+
+/// Up to a day: a longer wait is a writer stuck behind something else.
+fn parse_lock_wait(text: &str) -> Result<Duration, String> {
+    match text.trim().parse::<f64>() {
+        Ok(s) if (0.0..=86_400.0).contains(&s) => Ok(Duration::from_secs_f64(s)),
+        _ => Err(format!("{text:?}: expected seconds from 0 to 86400")),
     }
 }
 

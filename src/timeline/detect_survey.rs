@@ -107,7 +107,7 @@ fn io(path: &Path, message: impl std::fmt::Display) -> TimelineError {
 }
 
 /// Detects survey `name`'s changes against the twin before it, writes the change maps and
-/// `changes.json` and records the folder in the project (saved). `on_view(done, total)`
+/// `changes.json` and records the folder in the project (`record_changes`). `on_view(done, total)`
 /// reports progress.
 pub fn detect_survey(
     twin: &mut Twin,
@@ -193,9 +193,19 @@ pub fn detect_survey(
     let json = serde_json::to_string_pretty(&summary)
         .map_err(|e| io(&path, format!("cannot serialise the summary: {e}")))?;
     write_atomic(&path, |w| std::io::Write::write_all(w, json.as_bytes()))?;
-    twin.project.surveys[index].changes = Some(twin.relative(&folder));
-    twin.save()?;
+    record_changes(twin, name, &folder)?;
     Ok(summary)
+}
+
+/// Records `folder` as survey `name`'s change maps, as one commit (`Twin::commit`): only that
+/// survey's record changes in the project as it is now, so whatever another command recorded
+/// while the detection ran stays.
+pub fn record_changes(twin: &mut Twin, name: &str, folder: &Path) -> Result<(), TimelineError> {
+    twin.commit(|twin| {
+        let index = twin.survey_index(name)?;
+        twin.project.surveys[index].changes = Some(twin.relative(folder));
+        Ok(())
+    })
 }
 
 /// `detect_survey` as a job (the viewer's "detect changes"): progress per view; the project as

@@ -1,5 +1,5 @@
 //! `Twin`: an opened twin project folder. Opens and saves `twin.ron` (atomically, through
-//! `scene::project`), adds surveys with dataset paths stored relative to the folder, and writes
+//! `scene::project`, one writer at a time through `timeline::lock`), adds surveys with dataset paths stored relative to the folder, and writes
 //! each survey's model and metrics under `surveys/<name>/`. The app and the CLI both go through
 //! here; neither writes project files itself.
 
@@ -13,6 +13,7 @@ use crate::scene::atomic::write_atomic;
 use crate::scene::project::{PROJECT_FILE, Project, Survey, SurveyError};
 use crate::splats::Splats;
 use crate::splats::ply;
+use crate::timeline::lock::{LockError, ProjectLock, Writer};
 use crate::timeline::record::SurveyRecord;
 use crate::train::history::History;
 
@@ -43,15 +44,34 @@ pub enum TimelineError {
     Empty { file: PathBuf },
     #[error("{}: a twin project already exists there", file.display())]
     Exists { file: PathBuf },
+    #[error(transparent)]
+    Lock(#[from] LockError),
+    #[error(
+        "{}: changed by another command since it was read; open the project again and redo the change",
+        file.display()
+    )]
+    Changed { file: PathBuf },
     #[error("{}: {message}", path.display())]
     Io { path: PathBuf, message: String },
 }
 
 /// A twin project opened from (or created in) a folder.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct Twin {
     dir: PathBuf,
     pub project: Project,
+    /// The project as `twin.ron` held it when last read or written here (None: not saved yet), to
+    /// refuse a save over another writer's change.
+    base: Option<Project>,
+    /// How this process's writes are named to other writers, and how long they wait.
+    writer: Writer,
+}
+
+/// Two twins are the same project in the same folder, whoever writes them.
+impl PartialEq for Twin {
+    fn eq(&self, other: &Twin) -> bool {
+        self.dir == other.dir && self.project == other.project
+    }
 }
 
 impl Twin {
@@ -66,6 +86,8 @@ impl Twin {
         Ok(Twin {
             dir: dir.to_path_buf(),
             project: Project::new(),
+            base: None,
+            writer: Writer::default(),
         })
     }
 
@@ -81,7 +103,12 @@ impl Twin {
             (dir, path.to_path_buf())
         };
         let project = Project::load(&file)?;
-        Ok(Twin { dir, project })
+        Ok(Twin {
+            dir,
+            base: Some(project.clone()),
+            project,
+            writer: Writer::default(),
+        })
     }
 
     /// Opens the project in `dir`, or starts a new one there when it holds none.
@@ -103,9 +130,60 @@ impl Twin {
         self.dir.join(PROJECT_FILE)
     }
 
-    /// Writes `twin.ron` atomically.
-    pub fn save(&self) -> Result<(), TimelineError> {
-        Ok(self.project.save(&self.file())?)
+    /// This project's writes named `writer` to other writers (and waiting as long as it says).
+    pub fn with_writer(self, writer: Writer) -> Twin {
+        Twin { writer, ..self }
+    }
+
+    /// Writes `twin.ron` atomically as this project holds it, under the project's lock. Refuses
+    /// when another command changed the file since it was read here (or made a project where this
+    /// one is new): a whole-file save never overwrites a record it has not seen. A change to
+    /// part of a project is a `commit`.
+    pub fn save(&mut self) -> Result<(), TimelineError> {
+        let _lock = ProjectLock::acquire(&self.dir, &self.writer)?;
+        let file = self.file();
+        let unchanged = match &self.base {
+            Some(base) => &Project::load(&file)? == base,
+            None => !file.exists(),
+        };
+        if !unchanged {
+            return Err(match self.base {
+                Some(_) => TimelineError::Changed { file },
+                None => TimelineError::Exists { file },
+            });
+        }
+        self.write_project()
+    }
+
+    /// Changes the project as its one writer: under the project's lock, reads `twin.ron` again as
+    /// other writers left it, applies `change` to that (writing its own survey's files and
+    /// editing only its own records), writes `twin.ron` and keeps the result here. A long job
+    /// commits only when it ends, so a survey added or a scale set while it ran survives. A new
+    /// project (`create`) is refused when one appeared in its folder meanwhile. When `change`
+    /// fails, `twin.ron` and this project stay as they were.
+    pub fn commit<T>(
+        &mut self,
+        change: impl FnOnce(&mut Twin) -> Result<T, TimelineError>,
+    ) -> Result<T, TimelineError> {
+        let _lock = ProjectLock::acquire(&self.dir, &self.writer)?;
+        let file = self.file();
+        let mut current = self.clone();
+        if self.base.is_some() {
+            current.project = Project::load(&file)?;
+        } else if file.exists() {
+            return Err(TimelineError::Exists { file });
+        }
+        let result = change(&mut current)?;
+        current.write_project()?;
+        *self = current;
+        Ok(result)
+    }
+
+    /// Writes `twin.ron`; the caller holds the lock.
+    fn write_project(&mut self) -> Result<(), TimelineError> {
+        self.project.save(&self.file())?;
+        self.base = Some(self.project.clone());
+        Ok(())
     }
 
     /// A path from the project made usable: relative paths join the project folder.
@@ -284,8 +362,8 @@ impl Twin {
     /// Saves the model the viewer shows as the model of the survey of `dataset` (a bare model,
     /// `None`, is a survey without a dataset), adding that survey when the project has none for
     /// it: named after the dataset folder, dated today (or the latest survey's date when that is
-    /// later). Writes the model and `twin.ron`, the project file last, so an interrupted save
-    /// never names a model that is not there. Returns the survey's name.
+    /// later). Writes the model; `twin.ron` is the caller's `commit` to write, after it, so an
+    /// interrupted save never names a model that is not there. Returns the survey's name.
     pub fn save_survey_model(
         &mut self,
         dataset: Option<&Path>,
@@ -333,7 +411,6 @@ impl Twin {
             }
         };
         self.save_model(&name, splats)?;
-        self.save()?;
         Ok(name)
     }
 
@@ -423,7 +500,7 @@ pub fn today() -> String {
 
 /// The proleptic Gregorian date of a day count since 1970-01-01 (Howard Hinnant's
 /// civil-from-days).
-fn civil_date(days: i64) -> String {
+pub(crate) fn civil_date(days: i64) -> String {
     let z = days + 719_468;
     let era = z.div_euclid(146_097);
     let doe = z - era * 146_097;

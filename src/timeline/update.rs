@@ -120,19 +120,39 @@ pub struct UpdateOutcome {
     pub cancelled: bool,
 }
 
-/// Writes an update's result into the project: the model and `metrics.json` of the updated
-/// survey (no other survey's files) and its light, then `twin.ron`. Returns the model's path.
+/// Writes an update's result into the project (`commit_update`). Returns the model's path.
 pub fn record_update(
     twin: &mut Twin,
     outcome: &UpdateOutcome,
 ) -> Result<std::path::PathBuf, TimelineError> {
-    let name = &outcome.report.survey;
-    let index = twin.survey_index(name)?;
-    let path = twin.save_model(name, &outcome.splats)?;
-    twin.save_metrics(name, &outcome.report)?;
-    twin.project.surveys[index].appearance = outcome.report.appearance;
-    twin.save()?;
-    Ok(path)
+    let report = &outcome.report;
+    commit_update(
+        twin,
+        &report.survey,
+        &outcome.splats,
+        report,
+        report.appearance,
+    )
+}
+
+/// The end of an update, as one commit (`Twin::commit`): survey `name`'s model, its
+/// `metrics.json` (`report`) and its light (no other survey's files or records) written into the
+/// project as it is now, re-read under its lock, so whatever another command recorded while the
+/// update trained stays. Returns the model's path.
+pub fn commit_update(
+    twin: &mut Twin,
+    name: &str,
+    splats: &Splats,
+    report: &impl Serialize,
+    appearance: Option<ColourTransform>,
+) -> Result<std::path::PathBuf, TimelineError> {
+    twin.commit(|twin| {
+        let index = twin.survey_index(name)?;
+        let path = twin.save_model(name, splats)?;
+        twin.save_metrics(name, report)?;
+        twin.project.surveys[index].appearance = appearance;
+        Ok(path)
+    })
 }
 
 impl UpdateReport {

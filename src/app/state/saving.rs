@@ -1,14 +1,33 @@
 //! Saving from the viewer: a dataset or model as a new twin project, or the open project with
 //! its surveys (the shown survey's model, every survey edited here, the shown survey's name),
-//! all through `timeline::Twin`, whose writes are atomic.
+//! all through `timeline::Twin`, whose writes are atomic and go one writer at a time: a save
+//! merges into the project as other commands left it, or is refused with the writer holding it.
 
 use std::path::Path;
 use std::sync::Arc;
+use std::time::Duration;
 
 use super::AppState;
 use crate::splats::Splats;
 use crate::timeline::Twin;
+use crate::timeline::lock::{DEFAULT_LOCK_WAIT, Writer};
 use crate::timeline::record::record_training;
+
+/// How long a save from the window waits for another writer: the window does not redraw
+/// meanwhile, and a command that writes a project holds it for well under a second.
+const SAVE_LOCK_WAIT: Duration = Duration::from_secs(2);
+
+/// The viewer as a project's writer: a save on the UI thread waits `SAVE_LOCK_WAIT`; an update's
+/// or a detection's commit, in its worker, waits as long as the CLI's commands, so that minutes
+/// of training are not lost to a writer that is about to finish.
+pub(super) fn viewer_writer(in_worker: bool) -> Writer {
+    let wait = if in_worker {
+        DEFAULT_LOCK_WAIT
+    } else {
+        SAVE_LOCK_WAIT
+    };
+    Writer::new("the damage-twin viewer").waiting(wait)
+}
 
 impl AppState {
     pub(super) fn save_project(&mut self, dir: &Path) {
@@ -48,30 +67,25 @@ impl AppState {
         splats: &Splats,
     ) -> anyhow::Result<()> {
         use crate::scene::project::{ClassStyle, ProjectSettings};
-        let mut twin = Twin::open_or_create(dir)?;
-        twin.project.classes = crate::damage::DamageClass::ALL
-            .iter()
-            .zip(self.settings.damage.colours)
-            .map(|(&class, colour)| ClassStyle { class, colour })
-            .collect();
-        twin.project.settings = ProjectSettings {
-            background: self.settings.background,
-            scale: self.settings.training.scale,
-            ..twin.project.settings.clone()
-        };
-        let survey = twin.save_survey_model(dataset_root, splats)?;
-        if let Some(outcome) = self.training.as_ref().and_then(|t| t.outcome.as_ref()) {
-            let training = &self.settings.training;
-            record_training(
-                &mut twin,
-                &survey,
-                outcome,
-                training.mode,
-                training.scale,
-                None,
-            )?;
-            twin.save()?;
-        }
+        let mut twin = Twin::open_or_create(dir)?.with_writer(viewer_writer(false));
+        twin.commit(|twin| {
+            twin.project.classes = crate::damage::DamageClass::ALL
+                .iter()
+                .zip(self.settings.damage.colours)
+                .map(|(&class, colour)| ClassStyle { class, colour })
+                .collect();
+            twin.project.settings = ProjectSettings {
+                background: self.settings.background,
+                scale: self.settings.training.scale,
+                ..twin.project.settings.clone()
+            };
+            let survey = twin.save_survey_model(dataset_root, splats)?;
+            if let Some(outcome) = self.training.as_ref().and_then(|t| t.outcome.as_ref()) {
+                let training = &self.settings.training;
+                record_training(twin, &survey, outcome, training.mode, training.scale, None)?;
+            }
+            Ok(())
+        })?;
         Ok(())
     }
 
@@ -108,37 +122,42 @@ impl AppState {
             }
             twin.project = project;
             twin
-        };
-        twin.project.classes = crate::damage::DamageClass::ALL
-            .iter()
-            .zip(self.settings.damage.colours)
-            .map(|(&class, colour)| ClassStyle { class, colour })
-            .collect();
-        twin.project.settings.background = self.settings.background;
-        let names: Vec<String> = twin
-            .project
-            .surveys
-            .iter()
-            .map(|s| s.name.clone())
-            .collect();
-        twin.project.settings.shown_survey = names.get(timeline.current).cloned();
-        let mut written = Vec::new();
-        for (index, name) in names.iter().enumerate() {
-            let model = if index == timeline.current {
-                self.splats.clone()
-            } else {
-                match timeline.loaded.get(&index) {
-                    Some(slot) if slot.edited || !same_folder => slot.splats.clone(),
-                    _ if !same_folder => source.load_model(name)?.map(Arc::new),
-                    _ => None,
-                }
-            };
-            if let Some(model) = model {
-                twin.save_model(name, &model)?;
-                written.push(index);
-            }
         }
-        twin.save()?;
+        .with_writer(viewer_writer(false));
+        // Into the project as other commands left it: a survey added or a record written since
+        // it was opened here stays; the surveys shown here are found by name.
+        let written = twin.commit(|twin| {
+            twin.project.classes = crate::damage::DamageClass::ALL
+                .iter()
+                .zip(self.settings.damage.colours)
+                .map(|(&class, colour)| ClassStyle { class, colour })
+                .collect();
+            twin.project.settings.background = self.settings.background;
+            let names: Vec<&str> = source
+                .project
+                .surveys
+                .iter()
+                .map(|s| s.name.as_str())
+                .collect();
+            twin.project.settings.shown_survey = names.get(timeline.current).map(|n| n.to_string());
+            let mut written = Vec::new();
+            for (index, name) in names.into_iter().enumerate() {
+                let model = if index == timeline.current {
+                    self.splats.clone()
+                } else {
+                    match timeline.loaded.get(&index) {
+                        Some(slot) if slot.edited || !same_folder => slot.splats.clone(),
+                        _ if !same_folder => source.load_model(name)?.map(Arc::new),
+                        _ => None,
+                    }
+                };
+                if let Some(model) = model {
+                    twin.save_model(name, &model)?;
+                    written.push(index);
+                }
+            }
+            Ok(written)
+        })?;
         let Some(timeline) = &mut self.timeline else {
             return Ok(());
         };

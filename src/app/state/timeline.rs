@@ -11,6 +11,7 @@ use std::time::Duration;
 
 use crossbeam_channel::{Sender, TryRecvError};
 
+use super::saving::viewer_writer;
 use super::{AppState, WorkerResult};
 use crate::damage::layer::{DamageLayer, survey_colours};
 use crate::damage::refine::Strategy;
@@ -313,7 +314,7 @@ impl AppState {
             return;
         };
         let job = detect_job(
-            timeline.twin.clone(),
+            timeline.twin.clone().with_writer(viewer_writer(true)),
             name.clone(),
             DetectOptions {
                 scale: timeline.twin.project.settings.scale,
@@ -368,7 +369,8 @@ impl AppState {
             low_priority: true,
             ..JobOptions::default()
         };
-        let job = update_project_job(timeline.twin.clone(), name.clone(), config, options);
+        let twin = timeline.twin.clone().with_writer(viewer_writer(true));
+        let job = update_project_job(twin, name.clone(), config, options);
         timeline.job = Some(TimelineJob {
             work: TimelineWork::Update(job),
             survey,

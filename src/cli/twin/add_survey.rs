@@ -6,6 +6,8 @@ use std::path::PathBuf;
 
 use damage_twin::timeline::survey::AlignMode;
 
+use crate::cli::args::LockArgs;
+
 #[derive(clap::Args, Debug)]
 pub struct Args {
     pub dir: PathBuf,
@@ -20,13 +22,16 @@ pub struct Args {
     /// survey's images and the new ones, registered through the images they share.
     #[arg(long, default_value = "same-frame")]
     pub align: AlignMode,
+    #[command(flatten)]
+    pub lock: LockArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut twin = super::open(&args.dir)?;
-    let registration =
-        twin.add_placed_survey(&args.survey, &args.date, &args.dataset, args.align)?;
-    twin.save()?;
+    let mut twin = super::open_to_write(&args.dir, &args.lock, "twin add-survey")?;
+    // Added to the project as it is when the lock is held: another survey added meanwhile stays.
+    let registration = twin.commit(|twin| {
+        twin.add_placed_survey(&args.survey, &args.date, &args.dataset, args.align)
+    })?;
     match registration {
         Some(r) => println!(
             "added survey {} ({} views), registered through {} shared images ({} kept): residual \

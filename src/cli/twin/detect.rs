@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use damage_twin::timeline::changes::OLD_DAMAGE_THRESHOLD;
 use damage_twin::timeline::detect_survey::{DetectOptions, detect_survey};
 
-use crate::cli::args::ProjectScaleArgs;
+use crate::cli::args::{LockArgs, ProjectScaleArgs};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -43,10 +43,13 @@ pub struct Args {
     /// Label mode: the class probability above which the twin's render is old damage.
     #[arg(long, default_value_t = OLD_DAMAGE_THRESHOLD)]
     pub old_threshold: f32,
+    #[command(flatten)]
+    pub lock: LockArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut twin = super::open(&args.dir)?;
+    // Read now, locked only to record the change maps at the end (`record_changes`).
+    let mut twin = super::open_to_write(&args.dir, &args.lock, "twin detect")?;
     let options = DetectOptions {
         scale: args.scale.or_project(&twin),
         band_px: args.band,

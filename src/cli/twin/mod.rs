@@ -43,3 +43,12 @@ pub(crate) fn open(dir: &std::path::Path) -> anyhow::Result<damage_twin::timelin
     damage_twin::timeline::Twin::open(dir)
         .with_context(|| format!("opening the twin project {}", dir.display()))
 }
+
+/// Opens a project folder for a command that writes it, named `command` to other writers.
+pub(crate) fn open_to_write(
+    dir: &std::path::Path,
+    lock: &crate::cli::args::LockArgs,
+    command: &str,
+) -> anyhow::Result<damage_twin::timeline::Twin> {
+    Ok(open(dir)?.with_writer(lock.writer(command)))
+}

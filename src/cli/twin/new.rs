@@ -14,7 +14,7 @@ use damage_twin::timeline::record::record_training;
 use damage_twin::timeline::update::tag_damage;
 use damage_twin::train::history::History;
 
-use crate::cli::args::{JobArgs, drive, open_dataset, parse_scale, read_model};
+use crate::cli::args::{JobArgs, LockArgs, drive, open_dataset, parse_scale, read_model};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -41,14 +41,16 @@ pub struct Args {
     pub iters: u32,
     #[command(flatten)]
     pub job: JobArgs,
+    #[command(flatten)]
+    pub lock: LockArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut twin = Twin::create(&args.dir)?;
+    let mut twin = Twin::create(&args.dir)?.with_writer(args.lock.writer("twin new"));
     twin.add_survey(&args.survey, &args.date, &args.dataset)?;
     twin.project.settings.scale = args.scale;
-    let mut model = match &args.model {
-        Some(path) => read_model(path)?,
+    let (mut model, trained) = match &args.model {
+        Some(path) => (read_model(path)?, None),
         None => {
             let dataset = Arc::new(open_dataset(&args.dataset, glam::Vec3::ZERO)?);
             let config = RunConfig {
@@ -67,21 +69,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 outcome.heldout.as_ref().map(|s| s.psnr),
                 started.elapsed().as_secs_f64(),
             );
-            record_training(
-                &mut twin,
-                &args.survey,
-                &outcome,
-                mode,
-                scale,
-                Some(&history),
-            )?;
-            (*outcome.splats).clone()
+            (
+                (*outcome.splats).clone(),
+                Some((outcome, mode, scale, history)),
+            )
         }
     };
     // The first survey's damage is first seen in it.
     tag_damage(&mut model, 0);
-    let path = twin.save_model(&args.survey, &model)?;
-    twin.save()
+    // Every file is written under the project's lock, after checking that no other `twin new`
+    // made a project in this folder while this one trained.
+    let path = twin
+        .commit(|twin| {
+            if let Some((outcome, mode, scale, history)) = &trained {
+                record_training(twin, &args.survey, outcome, *mode, *scale, Some(history))?;
+            }
+            twin.save_model(&args.survey, &model)
+        })
         .with_context(|| format!("writing {}", twin.file().display()))?;
     println!(
         "created {} with survey {} ({} Gaussians in {})",

@@ -6,6 +6,8 @@ use std::path::PathBuf;
 use anyhow::bail;
 use glam::DVec3;
 
+use crate::cli::args::LockArgs;
+
 #[derive(clap::Args, Debug)]
 pub struct Args {
     pub dir: PathBuf,
@@ -20,6 +22,8 @@ pub struct Args {
     /// Or the scale itself.
     #[arg(long, conflicts_with = "from")]
     pub metres_per_unit: Option<f64>,
+    #[command(flatten)]
+    pub lock: LockArgs,
 }
 
 fn parse_point(text: &str) -> Result<DVec3, String> {
@@ -49,9 +53,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !(scale.is_finite() && scale > 0.0) {
         bail!("the scale must be a positive number of metres per unit, not {scale}");
     }
-    let mut twin = super::open(&args.dir)?;
-    twin.project.settings.metres_per_unit = Some(scale);
-    twin.save()?;
+    let mut twin = super::open_to_write(&args.dir, &args.lock, "twin set-scale")?;
+    twin.commit(|twin| {
+        twin.project.settings.metres_per_unit = Some(scale);
+        Ok(())
+    })?;
     println!("{}: {scale} metres per model unit", twin.file().display());
     Ok(())
 }

@@ -8,7 +8,7 @@ use damage_twin::damage::refine::Strategy;
 use damage_twin::timeline::update::{UpdateConfig, update_project_job};
 use damage_twin::train::history::History;
 
-use crate::cli::args::{JobArgs, ProjectScaleArgs, drive};
+use crate::cli::args::{JobArgs, LockArgs, ProjectScaleArgs, drive};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -44,10 +44,13 @@ pub struct Args {
     pub backend: damage_twin::train::backend_choice::Backend,
     #[command(flatten)]
     pub job: JobArgs,
+    #[command(flatten)]
+    pub lock: LockArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let twin = super::open(&args.dir)?;
+    // Read now, locked only to record the result when the training ends (`record_update`).
+    let twin = super::open_to_write(&args.dir, &args.lock, "twin update")?;
     twin.survey_index(&args.survey)?;
     let mut config = UpdateConfig::for_project(
         &twin,
