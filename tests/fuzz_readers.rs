@@ -21,6 +21,7 @@
 //! last line names the culprit if the process itself dies, e.g. by an allocation abort).
 
 mod fuzz_support;
+mod shared_data;
 
 use std::cell::RefCell;
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -138,7 +139,15 @@ fn watchdog(
     epoch
 }
 
-fn run(target: Target, started: &'static AtomicU64, current: &'static Mutex<String>) {
+/// Runs the target's cases; `None` is a target whose seeds need missing shared data (skipped).
+fn run(
+    target: impl Into<Option<Target>>,
+    started: &'static AtomicU64,
+    current: &'static Mutex<String>,
+) {
+    let Some(target) = target.into() else {
+        return;
+    };
     install_quiet_hook();
     let cfg = config();
     let epoch = watchdog(target.name, started, current);

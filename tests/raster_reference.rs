@@ -8,6 +8,7 @@
 //! `cargo test --test raster_reference -- --nocapture` prints them).
 
 mod raster_support;
+mod shared_data;
 
 use damage_twin::raster::reference;
 use damage_twin::raster::{PixelGrads, RenderSettings, SplatGrads};
@@ -24,7 +25,7 @@ const LABELS: usize = 3;
 // ---------------------------------------------------------------------------------------------
 
 fn reference_matches_gsplat(name: &str) {
-    let case = Case::load(name);
+    let Some(case) = Case::load(name) else { return };
     let splats = case.splats();
     let (camera, settings) = (raster_support::camera(), raster_support::settings());
     let (out, projected) = reference::render(&splats, &camera, &settings);

@@ -31,12 +31,6 @@ pub fn seed(dir: &Path, rel: &str, content: Content) -> (PathBuf, Vec<u8>, Conte
     (PathBuf::from(rel), bytes, content)
 }
 
-pub fn shared(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
-        .join(rel)
-}
-
 /// Opens the dataset and loads its first two views at two scales (pixels, masks, undistortion).
 pub fn open_and_load(root: &Path, _: &Path) -> Result<(), SceneError> {
     let ds = Dataset::open(root, &OpenOptions::default())?;
@@ -154,19 +148,20 @@ pub fn colmap_target(name: &'static str, text: bool) -> Target {
     }
 }
 
-/// A COLMAP dataset whose image files are mutated: the three PNGs and a real 28 KB JPEG.
-pub fn images_target() -> Target {
+/// A COLMAP dataset whose image files are mutated: the three PNGs and a real 28 KB JPEG (`None`,
+/// the test skips, without the shared data).
+pub fn images_target() -> Option<Target> {
+    let jpeg = crate::shared_data::path("crackforest/image/060.jpg")?;
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path();
     write_images(root);
-    let jpeg = shared("crackforest/image/060.jpg");
     std::fs::copy(&jpeg, root.join("images/real.jpg")).unwrap();
     let size = image::image_dimensions(&jpeg).unwrap();
     colmap::write_text(&root.join("sparse/0"), &colmap_model(Some(size))).unwrap();
     let seeds = ["im1.png", "im2.png", "im3.png", "real.jpg"]
         .map(|f| seed(root, &format!("images/{f}"), Content::Binary))
         .into();
-    Target {
+    Some(Target {
         name: "images",
         dir,
         seeds,
@@ -184,12 +179,13 @@ pub fn images_target() -> Target {
                 open_and_load_all(),
             ])
         },
-    }
+    })
 }
 
 /// A dataset with per-class and colour-coded masks, and a real crackforest mask read on its own
-/// (its 480 × 320 fits no view here).
-pub fn masks_target() -> Target {
+/// (its 480 × 320 fits no view here); `None` (the test skips) without the shared data.
+pub fn masks_target() -> Option<Target> {
+    let real_mask = crate::shared_data::path("crackforest/masks/060.png")?;
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path();
     write_images(root);
@@ -212,11 +208,7 @@ pub fn masks_target() -> Target {
     })
     .save(masks.join("im1.png"))
     .unwrap();
-    std::fs::copy(
-        shared("crackforest/masks/060.png"),
-        root.join("real_mask.png"),
-    )
-    .unwrap();
+    std::fs::copy(real_mask, root.join("real_mask.png")).unwrap();
     let seeds = [
         "masks/crack/im1.png",
         "masks/spalling/im2.png",
@@ -225,7 +217,7 @@ pub fn masks_target() -> Target {
     ]
     .map(|f| seed(root, f, Content::Binary))
     .into();
-    Target {
+    Some(Target {
         name: "masks",
         dir,
         seeds,
@@ -248,7 +240,7 @@ pub fn masks_target() -> Target {
             };
             first_error([direct, views()])
         },
-    }
+    })
 }
 
 pub fn transforms_target() -> Target {

@@ -5,7 +5,6 @@
 #![allow(dead_code)]
 
 use std::collections::HashMap;
-use std::path::PathBuf;
 
 use damage_twin::raster::{PixelGrads, RenderOutput, RenderSettings};
 use damage_twin::scene::{Camera, Intrinsics};
@@ -21,10 +20,10 @@ pub struct Case {
 }
 
 impl Case {
-    pub fn load(name: &str) -> Case {
-        let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../shared/data/brush_gsplat_reference")
-            .join(name);
+    /// The case in file `name`, or `None` (the test skips) when the reference data is missing.
+    /// Test crates that use this module also declare `mod shared_data;`.
+    pub fn load(name: &str) -> Option<Case> {
+        let path = crate::shared_data::path(&format!("brush_gsplat_reference/{name}"))?;
         let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         let st = safetensors::SafeTensors::deserialize(&bytes).expect("valid safetensors");
         let mut tensors = HashMap::new();
@@ -37,7 +36,7 @@ impl Case {
                 .collect();
             tensors.insert(key, values);
         }
-        Case { tensors }
+        Some(Case { tensors })
     }
 
     pub fn get(&self, key: &str) -> &[f32] {
