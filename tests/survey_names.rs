@@ -120,7 +120,7 @@ impl Place {
             "--survey".as_ref(),
             survey.as_ref(),
         ];
-        args.extend(extra.iter().map(|a| std::ffi::OsStr::new(a)));
+        args.extend(extra.iter().map(std::ffi::OsStr::new));
         cli(&args)
     }
 }
