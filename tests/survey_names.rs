@@ -230,6 +230,44 @@ fn unknown_surveys_are_refused_before_anything_is_written() {
     assert_eq!(std::fs::read(&project_file).expect("twin.ron"), saved);
 }
 
+/// What `detect` and `update` write for a survey (its model, metrics, history) cannot land outside
+/// the project or in another survey's folder: such a survey cannot be added, and a name no survey
+/// has writes nothing.
+#[test]
+fn survey_outputs_cannot_be_named_outside_the_project_or_onto_another_survey() {
+    let place = Place::new();
+    let mut twin = Twin::create(&place.project()).expect("project");
+    twin.add_survey("2024", "2024-06-01", &place.root.join("data/2024"))
+        .expect("survey");
+    twin.save_model("2024", &one_gaussian()).expect("model");
+    twin.save().expect("saves");
+    let model = std::fs::read(place.project().join("surveys/2024/model.ply")).expect("model");
+    let before = place.outside_files();
+    let mut other = one_gaussian();
+    other.means[0] = glam::Vec3::ONE;
+    for name in ["../../../outside", "./2024", "2024/", "x/../2024"] {
+        let added = twin.add_survey(name, "2025-06-01", &place.root.join("data/2025"));
+        let error = added.expect_err("a path as a survey name").to_string();
+        assert!(error.contains("survey name"), "{error}");
+        assert!(twin.save_model(name, &other).is_err(), "{name}");
+        assert!(
+            twin.save_metrics(name, &serde_json::json!({"psnr": 1.0}))
+                .is_err(),
+            "{name}"
+        );
+        assert!(
+            twin.save_history(name, &Default::default()).is_err(),
+            "{name}"
+        );
+    }
+    assert_eq!(place.outside_files(), before);
+    assert_eq!(
+        std::fs::read(place.project().join("surveys/2024/model.ply")).expect("model"),
+        model,
+        "survey 2024's model is as it was"
+    );
+}
+
 fn walk(dir: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
     for entry in std::fs::read_dir(dir).expect("lists") {
