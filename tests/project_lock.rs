@@ -130,7 +130,10 @@ fn a_long_jobs_commit_keeps_what_others_wrote_meanwhile() {
 
     let report = serde_json::json!({"survey": "2025", "psnr": 30.0});
     commit_update(&mut updating, "2025", &tiny_model(), &report, None).expect("update commits");
-    let folder = updating.survey_dir("2025").join("changes");
+    let folder = updating
+        .survey_dir("2025")
+        .expect("survey 2025 exists")
+        .join("changes");
     record_changes(&mut detecting, "2025", &folder).expect("detection commits");
 
     let back = Twin::open(&project).expect("opens");

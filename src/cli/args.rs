@@ -182,6 +182,12 @@ pub fn parse_scale(text: &str) -> Result<ImageScale, String> {
     })
 }
 
+/// `--survey NAME` of a survey being added: refused here, before any folder is made.
+pub fn parse_survey_name(text: &str) -> Result<String, String> {
+    damage_twin::scene::project::Survey::check_name(text).map_err(|e| e.to_string())?;
+    Ok(text.to_string())
+}
+
 pub fn parse_background(text: &str) -> Result<Vec3, String> {
     match text {
         "white" => return Ok(Vec3::ONE),

@@ -139,7 +139,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             runs.extend(project_runs(&survey.name, &metrics));
         }
         if let Some(history) = twin.load_history(&survey.name)? {
-            let name = twin.survey_dir(&survey.name).join(HISTORY_FILE);
+            let name = twin.survey_file(&survey.name, HISTORY_FILE)?;
             charts.push(Figure::svg(
                 format!(
                     "survey {}: training (loss, held-out PSNR, Gaussians)",

@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::scene::atomic::write_atomic;
 use crate::scene::files::read_regular;
 use crate::scene::limits::{MAX_IMAGE_SIDE, MAX_PROJECT_BYTES};
+use crate::scene::survey_name::{BadSurveyName, check_survey_name, same_survey_name};
 use crate::scene::{DamageClass, NEW_DAMAGE_COLOUR};
 use crate::scene::{ImageScale, SceneError};
 
@@ -56,6 +57,41 @@ pub struct Survey {
     /// The survey's appearance relative to the twin's colours (lighting differs between surveys).
     #[serde(default)]
     pub appearance: Option<ColourTransform>,
+}
+
+impl Survey {
+    /// Checks that `name` can name a survey (`survey_name::check_survey_name`), as the error
+    /// adding such a survey would give.
+    pub fn check_name(name: &str) -> Result<(), SurveyError> {
+        check_survey_name(name).map_err(|why| SurveyError::BadName {
+            name: name.to_string(),
+            why,
+        })
+    }
+
+    /// The survey's outputs that `twin.ron` names, with their field names. They are the
+    /// project's own files, so they must lie inside its folder; the dataset is an input and may
+    /// lie anywhere (`twin new --dataset` stores it relative to the project, `../data/…`).
+    pub fn outputs(&self) -> impl Iterator<Item = (&'static str, &Path)> {
+        [
+            ("model", &self.model),
+            ("metrics", &self.metrics),
+            ("changes", &self.changes),
+        ]
+        .into_iter()
+        .filter_map(|(field, path)| path.as_deref().map(|p| (field, p)))
+    }
+}
+
+/// Whether `path`, relative to the project folder, stays below it: not empty, not absolute, no
+/// `..`. Lexical only; `timeline::Twin` also refuses links that lead out.
+pub fn stays_inside(path: &Path) -> bool {
+    use std::path::Component;
+    !path.as_os_str().is_empty()
+        && path
+            .components()
+            .all(|c| matches!(c, Component::Normal(_) | Component::CurDir))
+        && path.components().any(|c| matches!(c, Component::Normal(_)))
 }
 
 /// A similarity from a dataset's frame to the twin's, `x_twin = scale·R·x + translation`, and
@@ -162,6 +198,8 @@ pub struct Project {
 /// Why a survey cannot be added.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum SurveyError {
+    #[error("survey name `{}` {why}", name.escape_debug())]
+    BadName { name: String, why: BadSurveyName },
     #[error("survey `{name}`: date `{date}` is not YYYY-MM-DD")]
     BadDate { name: String, date: String },
     #[error(
@@ -173,6 +211,7 @@ pub enum SurveyError {
         latest: String,
         latest_date: String,
     },
+    /// Names compare without case: on macOS and Windows they would share a folder.
     #[error("a survey named `{0}` already exists")]
     Duplicate(String),
 }
@@ -230,14 +269,19 @@ impl Project {
     /// Appends a survey, which must not be older than the latest one (indices must not shift).
     /// Returns its index.
     pub fn add_survey(&mut self, survey: Survey) -> Result<usize, SurveyError> {
+        Survey::check_name(&survey.name)?;
         if !is_iso_date(&survey.date) {
             return Err(SurveyError::BadDate {
                 name: survey.name,
                 date: survey.date,
             });
         }
-        if self.surveys.iter().any(|s| s.name == survey.name) {
-            return Err(SurveyError::Duplicate(survey.name));
+        if let Some(taken) = self
+            .surveys
+            .iter()
+            .find(|s| same_survey_name(&s.name, &survey.name))
+        {
+            return Err(SurveyError::Duplicate(taken.name.clone()));
         }
         if let Some(latest) = self.surveys.last()
             && survey.date < latest.date
@@ -263,16 +307,27 @@ impl Project {
             .map_or_else(|| path.to_path_buf(), |dir| dir.join(path))
     }
 
-    /// Checks what the types cannot: date format and order, unique names, a finite background.
+    /// Checks what the types cannot: names (`survey_name`), date format and order, outputs
+    /// inside the project folder, a background colour, a known scale.
     fn validate(&self) -> Result<(), String> {
         let mut check = Project {
             surveys: Vec::new(),
             ..self.clone()
         };
-        for survey in &self.surveys {
-            check
-                .add_survey(survey.clone())
-                .map_err(|e| e.to_string())?;
+        for (index, survey) in self.surveys.iter().enumerate() {
+            check.add_survey(survey.clone()).map_err(|e| match e {
+                SurveyError::BadName { .. } => format!("surveys[{index}].name: {e}"),
+                _ => e.to_string(),
+            })?;
+            for (field, path) in survey.outputs() {
+                if !stays_inside(path) {
+                    return Err(format!(
+                        "surveys[{index}].{field} `{}` is not a path inside the project folder \
+                         (a survey's outputs are stored relative to it, below it)",
+                        path.display()
+                    ));
+                }
+            }
         }
         let bg = self.settings.background;
         if !bg.iter().all(|v| (0.0..=1.0).contains(v)) {
@@ -393,6 +448,15 @@ mod tests {
         assert!(matches!(
             project.add_survey(survey("b", "2025-01-01")),
             Err(SurveyError::Duplicate(_))
+        ));
+        // `B` and `b` would share a folder on macOS and Windows.
+        assert_eq!(
+            project.add_survey(survey("B", "2025-01-01")),
+            Err(SurveyError::Duplicate("b".into()))
+        );
+        assert!(matches!(
+            project.add_survey(survey("../b", "2025-01-01")),
+            Err(SurveyError::BadName { .. })
         ));
     }
 

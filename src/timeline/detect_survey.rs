@@ -152,7 +152,8 @@ pub fn detect_survey(
         None
     };
     let detection = detect(&model, &dataset, &config, earlier.as_ref(), on_view)?;
-    let folder = twin.survey_dir(name).join(CHANGES_DIR);
+    twin.create_survey_dir(name)?;
+    let folder = twin.survey_file(name, CHANGES_DIR)?;
     std::fs::create_dir_all(&folder).map_err(|e| io(&folder, e))?;
     for view in &detection.views {
         let photo = dataset.load_view(view.index, options.scale)?;

@@ -11,6 +11,7 @@ pub mod components;
 pub mod detect_survey;
 pub mod earlier;
 pub mod lock;
+pub mod project_paths;
 pub mod quantities;
 pub mod record;
 pub mod seed;

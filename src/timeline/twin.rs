@@ -1,7 +1,8 @@
 //! `Twin`: an opened twin project folder. Opens and saves `twin.ron` (atomically, through
-//! `scene::project`, one writer at a time through `timeline::lock`), adds surveys with dataset paths stored relative to the folder, and writes
-//! each survey's model and metrics under `surveys/<name>/`. The app and the CLI both go through
-//! here; neither writes project files itself.
+//! `scene::project`, one writer at a time through `timeline::lock`), adds surveys with dataset
+//! paths stored relative to the folder, and writes each survey's model and metrics under
+//! `surveys/<name>/`, kept inside the folder by `project_paths`. The app and the CLI both go
+//! through here; neither writes project files itself.
 
 use std::path::{Component, Path, PathBuf};
 
@@ -11,6 +12,7 @@ use serde::de::DeserializeOwned;
 use crate::scene::SceneError;
 use crate::scene::atomic::write_atomic;
 use crate::scene::project::{PROJECT_FILE, Project, Survey, SurveyError};
+use crate::scene::survey_name::{same_survey_name, survey_name_from};
 use crate::splats::Splats;
 use crate::splats::ply;
 use crate::timeline::lock::{LockError, ProjectLock, Writer};
@@ -34,7 +36,7 @@ pub enum TimelineError {
         #[source]
         source: SurveyError,
     },
-    #[error("{}: no survey named `{name}` (surveys: {known})", file.display())]
+    #[error("{}: no survey named `{}` (surveys: {known})", file.display(), name.escape_debug())]
     NoSurvey {
         file: PathBuf,
         name: String,
@@ -53,6 +55,9 @@ pub enum TimelineError {
     Changed { file: PathBuf },
     #[error("{}: {message}", path.display())]
     Io { path: PathBuf, message: String },
+    /// A path the project names, or a link on it, leads out of the project folder.
+    #[error("{}: lies outside the project folder {}; a project's files stay inside it", path.display(), dir.display())]
+    Outside { path: PathBuf, dir: PathBuf },
 }
 
 /// A twin project opened from (or created in) a folder.
@@ -186,7 +191,8 @@ impl Twin {
         Ok(())
     }
 
-    /// A path from the project made usable: relative paths join the project folder.
+    /// An input path from the project (a dataset) made usable: relative paths join the project
+    /// folder. The project's own files are resolved by `inside`, which keeps them there.
     pub fn resolve(&self, path: &Path) -> PathBuf {
         if path.is_absolute() {
             path.to_path_buf()
@@ -267,19 +273,18 @@ impl Twin {
         })
     }
 
-    /// The folder of a survey's outputs, `<dir>/surveys/<name>/`.
-    pub fn survey_dir(&self, name: &str) -> PathBuf {
-        self.dir.join("surveys").join(name)
-    }
-
     /// A survey's dataset folder, resolved.
     pub fn dataset_path(&self, name: &str) -> Result<PathBuf, TimelineError> {
         Ok(self.resolve(&self.survey(name)?.dataset))
     }
 
-    /// A survey's model file, resolved (None before one was saved).
+    /// A survey's model file, resolved inside the project (None before one was saved).
     pub fn model_path(&self, name: &str) -> Result<Option<PathBuf>, TimelineError> {
-        Ok(self.survey(name)?.model.as_ref().map(|m| self.resolve(m)))
+        self.survey(name)?
+            .model
+            .as_ref()
+            .map(|m| self.inside(m))
+            .transpose()
     }
 
     /// Reads a survey's model.
@@ -295,9 +300,8 @@ impl Twin {
     /// every other survey's model stays as it is.
     pub fn save_model(&mut self, name: &str, splats: &Splats) -> Result<PathBuf, TimelineError> {
         let index = self.survey_index(name)?;
-        let folder = self.survey_dir(name);
-        std::fs::create_dir_all(&folder).map_err(|e| io_error(&folder, e))?;
-        let path = folder.join(MODEL_FILE);
+        self.create_survey_dir(name)?;
+        let path = self.survey_file(name, MODEL_FILE)?;
         ply::write_splats(&path, splats)?;
         self.project.surveys[index].model = Some(self.relative(&path));
         Ok(path)
@@ -321,7 +325,7 @@ impl Twin {
     pub fn load_metrics(&self, name: &str) -> Result<Option<SurveyRecord>, TimelineError> {
         let index = self.survey_index(name)?;
         match &self.project.surveys[index].metrics {
-            Some(file) => read_json(&self.dir.join(file)).map(Some),
+            Some(file) => read_json(&self.inside(file)?).map(Some),
             None => Ok(None),
         }
     }
@@ -329,13 +333,12 @@ impl Twin {
     /// Writes the training history that made survey `name`'s model
     /// (`surveys/<name>/history.json`, atomically).
     pub fn save_history(&self, name: &str, history: &History) -> Result<PathBuf, TimelineError> {
-        self.survey_index(name)?;
         self.write_survey_json(name, HISTORY_FILE, history)
     }
 
     /// The training history of survey `name`'s model, where one was kept.
     pub fn load_history(&self, name: &str) -> Result<Option<History>, TimelineError> {
-        let path = self.survey_dir(name).join(HISTORY_FILE);
+        let path = self.survey_file(name, HISTORY_FILE)?;
         if !path.is_file() {
             return Ok(None);
         }
@@ -348,9 +351,8 @@ impl Twin {
         file: &str,
         value: &impl Serialize,
     ) -> Result<PathBuf, TimelineError> {
-        let folder = self.survey_dir(name);
-        std::fs::create_dir_all(&folder).map_err(|e| io_error(&folder, e))?;
-        let path = folder.join(file);
+        self.create_survey_dir(name)?;
+        let path = self.survey_file(name, file)?;
         let text = serde_json::to_string_pretty(value).map_err(|e| TimelineError::Io {
             path: path.clone(),
             message: format!("cannot serialise: {e}"),
@@ -383,8 +385,7 @@ impl Twin {
             None => {
                 let base = dataset
                     .and_then(|d| d.file_name())
-                    .map(|n| n.to_string_lossy().into_owned())
-                    .filter(|n| !n.is_empty())
+                    .map(|n| survey_name_from(&n.to_string_lossy()))
                     .unwrap_or_else(|| "survey".into());
                 let name = self.unused_name(&base);
                 let mut date = today();
@@ -414,9 +415,14 @@ impl Twin {
         Ok(name)
     }
 
-    /// A survey name not yet used: `base`, else `base-2`, `base-3`, …
+    /// A survey name not yet used (compared without case): `base`, else `base-2`, `base-3`, …
     pub fn unused_name(&self, base: &str) -> String {
-        let taken = |n: &str| self.project.surveys.iter().any(|s| s.name == n);
+        let taken = |n: &str| {
+            self.project
+                .surveys
+                .iter()
+                .any(|s| same_survey_name(&s.name, n))
+        };
         if !taken(base) {
             return base.to_string();
         }
@@ -436,7 +442,7 @@ fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T, TimelineError> {
     })
 }
 
-fn io_error(path: &Path, e: std::io::Error) -> TimelineError {
+pub(crate) fn io_error(path: &Path, e: std::io::Error) -> TimelineError {
     TimelineError::Io {
         path: path.to_path_buf(),
         message: e.to_string(),

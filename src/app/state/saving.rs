@@ -92,8 +92,8 @@ impl AppState {
     /// Saves the open project into `dir` (its own folder, or another one for "save as"): the
     /// model on screen as the shown survey's, every other survey edited here as its own, the
     /// shown survey and the viewer's colours in `twin.ron`. Into another folder every survey's
-    /// model is written there, and datasets, metrics and change maps are referred to where they
-    /// are.
+    /// model, metrics, history and change maps are written there (a project's own files stay
+    /// inside its folder), and datasets are referred to where they are.
     fn save_timeline(&mut self, dir: &std::path::Path) -> anyhow::Result<()> {
         use crate::scene::project::ClassStyle;
         let Some(timeline) = &self.timeline else {
@@ -116,11 +116,14 @@ impl AppState {
             };
             for survey in &mut project.surveys {
                 survey.dataset = moved(&survey.dataset);
-                survey.metrics = survey.metrics.as_deref().map(moved);
-                survey.changes = survey.changes.as_deref().map(moved);
+                survey.metrics = None;
+                survey.changes = None;
                 survey.model = None;
             }
             twin.project = project;
+            for survey in &source.project.surveys {
+                twin.copy_survey_records(source, &survey.name)?;
+            }
             twin
         }
         .with_writer(viewer_writer(false));

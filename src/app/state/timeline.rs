@@ -133,7 +133,7 @@ impl TimelineView {
     /// The change map of view `view_name` of the survey shown, when changes were detected.
     pub fn change_map(&self, view_name: &str) -> Option<PathBuf> {
         let survey = self.twin.project.surveys.get(self.current)?;
-        let folder = self.twin.resolve(survey.changes.as_ref()?);
+        let folder = self.twin.inside(survey.changes.as_ref()?).ok()?;
         let path = change_map_path(&folder, view_name);
         path.is_file().then_some(path)
     }

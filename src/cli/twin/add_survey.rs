@@ -6,12 +6,13 @@ use std::path::PathBuf;
 
 use damage_twin::timeline::survey::AlignMode;
 
-use crate::cli::args::LockArgs;
+use crate::cli::args::{LockArgs, parse_survey_name};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
     pub dir: PathBuf,
-    #[arg(long)]
+    /// The survey's name, also its folder's: ASCII letters, digits, `-`, `_`, `.`.
+    #[arg(long, value_parser = parse_survey_name)]
     pub survey: String,
     /// The survey's date, YYYY-MM-DD (not before the latest survey's).
     #[arg(long)]

@@ -14,13 +14,16 @@ use damage_twin::timeline::record::record_training;
 use damage_twin::timeline::update::tag_damage;
 use damage_twin::train::history::History;
 
-use crate::cli::args::{JobArgs, LockArgs, drive, open_dataset, parse_scale, read_model};
+use crate::cli::args::{
+    JobArgs, LockArgs, drive, open_dataset, parse_scale, parse_survey_name, read_model,
+};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The project folder (created; must not hold a project yet).
     pub dir: PathBuf,
-    #[arg(long)]
+    /// The survey's name, also its folder's: ASCII letters, digits, `-`, `_`, `.`.
+    #[arg(long, value_parser = parse_survey_name)]
     pub survey: String,
     /// The survey's date, YYYY-MM-DD.
     #[arg(long)]

@@ -84,7 +84,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let path = twin
         .model_path(&args.survey)?
-        .unwrap_or_else(|| twin.survey_dir(&args.survey));
+        .map_or_else(|| twin.survey_dir(&args.survey), Ok)?;
     let r = &outcome.report;
     println!(
         "updated {} from {} in {:.0} s: {} new-damage Gaussians; held-out IoU {:?} → {:?}; model {}",
