@@ -165,9 +165,9 @@ impl Twin {
         };
         self.project
             .add_survey(survey)
-            .map_err(|source| TimelineError::Survey {
+            .map_err(|problem| TimelineError::Survey {
                 file: self.file(),
-                source,
+                problem,
             })?;
         Ok(registration)
     }

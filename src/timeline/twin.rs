@@ -30,12 +30,10 @@ pub const HISTORY_FILE: &str = "history.json";
 pub enum TimelineError {
     #[error(transparent)]
     Scene(#[from] SceneError),
-    #[error("{}: {source}", file.display())]
-    Survey {
-        file: PathBuf,
-        #[source]
-        source: SurveyError,
-    },
+    // `problem` is no `#[source]`: it is already in the message, and anyhow's chain would print it
+    // a second time.
+    #[error("{}: {problem}", file.display())]
+    Survey { file: PathBuf, problem: SurveyError },
     #[error("{}: no survey named `{}` (surveys: {known})", file.display(), name.escape_debug())]
     NoSurvey {
         file: PathBuf,
@@ -227,9 +225,9 @@ impl Twin {
         };
         self.project
             .add_survey(survey)
-            .map_err(|source| TimelineError::Survey {
+            .map_err(|problem| TimelineError::Survey {
                 file: self.file(),
-                source,
+                problem,
             })
     }
 
@@ -404,9 +402,9 @@ impl Twin {
                         metrics: None,
                         ..Default::default()
                     })
-                    .map_err(|source| TimelineError::Survey {
+                    .map_err(|problem| TimelineError::Survey {
                         file: self.file(),
-                        source,
+                        problem,
                     })?;
                 name
             }
