@@ -394,13 +394,13 @@ fn the_app_names_surveys_after_their_folders_as_plain_names() {
     let odd = place.root.join("data/Brücke 2024");
     std::fs::create_dir_all(&odd).expect("folder");
     let first = twin
-        .save_survey_model(Some(&odd), &one_gaussian())
+        .commit(|twin| twin.save_survey_model(Some(&odd), &one_gaussian()))
         .expect("saves");
     assert_eq!(first, "Br-cke-2024");
     let shouting = place.root.join("data/BR-CKE-2024");
     std::fs::create_dir_all(&shouting).expect("folder");
     let second = twin
-        .save_survey_model(Some(&shouting), &one_gaussian())
+        .commit(|twin| twin.save_survey_model(Some(&shouting), &one_gaussian()))
         .expect("saves");
     assert_eq!(
         second, "BR-CKE-2024-2",
@@ -408,7 +408,7 @@ fn the_app_names_surveys_after_their_folders_as_plain_names() {
     );
     let dots = place.root.join("data/..");
     let third = twin
-        .save_survey_model(Some(&dots), &one_gaussian())
+        .commit(|twin| twin.save_survey_model(Some(&dots), &one_gaussian()))
         .expect("saves");
     assert_eq!(third, "survey");
     for name in [&first, &second, &third] {
