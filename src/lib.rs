@@ -12,6 +12,7 @@ pub mod metrics;
 pub mod raster;
 pub mod report;
 pub mod scene;
+pub mod segment;
 pub mod simd;
 pub mod splats;
 pub mod studies;

@@ -16,6 +16,7 @@ const LAYERS: &[&[&str]] = &[
     &["gpu"],
     &["train"],
     &["damage"],
+    &["segment"],
     &["timeline"],
     &["report"],
     &["studies"],

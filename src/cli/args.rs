@@ -272,13 +272,16 @@ pub fn drive<R: Send + 'static>(
             } else {
                 String::new()
             };
-            bar.set_prefix(format!(
-                "{loss}held-out PSNR {} | {} Gaussians",
-                last_psnr
-                    .map(|v| format!("{v:.2} dB"))
-                    .unwrap_or_else(|| "-".into()),
-                p.gaussians
-            ));
+            // A job with no model (segmentation) has no PSNR or Gaussians to show.
+            if p.gaussians > 0 || last_psnr.is_some() || p.loss.is_finite() {
+                bar.set_prefix(format!(
+                    "{loss}held-out PSNR {} | {} Gaussians",
+                    last_psnr
+                        .map(|v| format!("{v:.2} dB"))
+                        .unwrap_or_else(|| "-".into()),
+                    p.gaussians
+                ));
+            }
         }
         JobEvent::Log(line) => print_line(&bar, line),
         JobEvent::NanRolledBack { step, reason } => {

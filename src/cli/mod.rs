@@ -13,6 +13,7 @@ mod launch;
 mod refine;
 mod render;
 mod report;
+mod segment;
 mod study;
 mod synth;
 mod train;
@@ -59,6 +60,9 @@ enum Command {
     Bench(bench::Args),
     /// Milliseconds per frame by stage, GPU (wgpu) and CPU side by side (JSON).
     BenchRender(bench_render::Args),
+    /// Damage masks from the photos: an ONNX segmentation model over a dataset's photos, in
+    /// tiles; writes masks/<class>/ and probabilities/<class>/ beside them.
+    Segment(segment::Args),
     /// Studies that measure the twin (mask-noise: how much segmentation error it removes).
     #[command(subcommand)]
     Study(study::Study),
@@ -90,6 +94,7 @@ pub fn main() -> ExitCode {
         Some(Command::Report(args)) => report::run(args),
         Some(Command::Bench(args)) => bench::run(args),
         Some(Command::BenchRender(args)) => bench_render::run(args),
+        Some(Command::Segment(args)) => segment::run(args),
         Some(Command::Study(study)) => study::run(study),
         Some(Command::Twin(command)) => twin::run(command),
         Some(Command::Demo(args)) => demo::run(args),

@@ -113,15 +113,21 @@ pub fn save_mask_png(path: &Path, mask: &Mask) -> Result<(), SceneError> {
         .iter()
         .map(|&v| if v != 0 { 255 } else { 0 })
         .collect();
-    let img = image::GrayImage::from_raw(mask.width, mask.height, bytes).ok_or_else(|| {
+    save_grey_png(path, mask.width, mask.height, bytes)
+}
+
+/// Saves `width × height` 8-bit grey values (row-major) as a PNG, atomically.
+pub fn save_grey_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    values: Vec<u8>,
+) -> Result<(), SceneError> {
+    let count = values.len();
+    let img = image::GrayImage::from_raw(width, height, values).ok_or_else(|| {
         SceneError::invalid(
             path,
-            format!(
-                "cannot save a {}×{} mask holding {} values",
-                mask.width,
-                mask.height,
-                mask.data.len()
-            ),
+            format!("cannot save a {width}×{height} grey image holding {count} values"),
         )
     })?;
     write_png_atomic(path, &img)
