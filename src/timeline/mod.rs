@@ -15,6 +15,7 @@ pub mod project_paths;
 pub mod quantities;
 pub mod record;
 pub mod seed;
+pub mod segment_survey;
 pub mod survey;
 pub mod twin;
 pub mod update;

@@ -1,12 +1,22 @@
 //! `damage-twin twin add-survey DIR --survey NAME --date YYYY-MM-DD --dataset PATH
-//! [--align same-frame|joint]`: a later survey placed in the twin's frame; `joint` reports the
-//! registration's residual.
+//! [--align same-frame|joint] [--segment MODEL.onnx]`: a later survey placed in the twin's frame;
+//! `joint` reports the registration's residual. With `--segment` the survey may arrive as photos
+//! alone: its photos are segmented first and the masks written into its dataset
+//! (`timeline::segment_survey`), then it is added.
 
 use std::path::PathBuf;
+use std::time::Duration;
 
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use damage_twin::segment::SegmentModel;
+use damage_twin::timeline::Twin;
+use damage_twin::timeline::segment_survey::NewSurvey;
 use damage_twin::timeline::survey::AlignMode;
 
-use crate::cli::args::{LockArgs, parse_survey_name};
+use crate::cli::args::{JobArgs, LockArgs, parse_survey_name};
+use crate::cli::segment::{ModelArgs, print_summary};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -23,12 +33,23 @@ pub struct Args {
     /// survey's images and the new ones, registered through the images they share.
     #[arg(long, default_value = "same-frame")]
     pub align: AlignMode,
+    /// Segment the survey's photos with this ONNX model first (masks written into the dataset,
+    /// never over masks already there); the model options are `segment`'s.
+    #[arg(long)]
+    pub segment: Option<PathBuf>,
+    #[command(flatten)]
+    pub model: ModelArgs,
+    #[command(flatten)]
+    pub job: JobArgs,
     #[command(flatten)]
     pub lock: LockArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let mut twin = super::open_to_write(&args.dir, &args.lock, "twin add-survey")?;
+    if let Some(model) = &args.segment {
+        segment_survey(&twin, &args, model)?;
+    }
     // Added to the project as it is when the lock is held: another survey added meanwhile stays.
     let registration = twin.commit(|twin| {
         twin.add_placed_survey(&args.survey, &args.date, &args.dataset, args.align)
@@ -50,5 +71,49 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ),
         None => println!("added survey {} (same frame)", args.survey),
     }
+    Ok(())
+}
+
+/// The survey's photos through `model_path` into its dataset's masks, with a progress bar.
+fn segment_survey(twin: &Twin, args: &Args, model_path: &std::path::Path) -> anyhow::Result<()> {
+    let settings = args
+        .model
+        .settings(false, twin.project.settings.background)?;
+    let model = SegmentModel::open(model_path, settings.classes.len())?;
+    let bar = if args.job.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(0)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{msg:>10} {bar:30} {pos}/{len} photos ETA {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_message("segment");
+    bar.enable_steady_tick(Duration::from_millis(250));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.job.threads.unwrap_or(0))
+        .build()
+        .context("the worker threads")?;
+    let summary = pool.install(|| {
+        twin.segment_new_survey(
+            NewSurvey {
+                name: &args.survey,
+                date: &args.date,
+                dataset: &args.dataset,
+                align: args.align,
+            },
+            &model,
+            &settings,
+            &mut |done, total| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+                true
+            },
+        )
+    });
+    bar.finish_and_clear();
+    let summary = summary.with_context(|| format!("segmenting survey {}", args.survey))?;
+    print_summary(&summary, pool.current_num_threads(), &args.dataset);
     Ok(())
 }

@@ -46,6 +46,9 @@ pub enum TimelineError {
     Exists { file: PathBuf },
     #[error(transparent)]
     Lock(#[from] LockError),
+    /// Segmenting a survey's photos (`twin add-survey --segment`).
+    #[error(transparent)]
+    Segment(#[from] crate::segment::SegmentError),
     #[error(
         "{}: changed by another command since it was read; open the project again and redo the change",
         file.display()
