@@ -5,4 +5,5 @@
 pub mod budget;
 pub mod hierarchy;
 pub mod mask_noise;
+pub mod segment;
 pub mod stability;

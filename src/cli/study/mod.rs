@@ -4,6 +4,7 @@
 mod budget;
 mod hierarchy;
 mod mask_noise;
+mod segment;
 mod stability;
 
 #[derive(clap::Subcommand, Debug)]
@@ -20,6 +21,10 @@ pub enum Study {
     /// Where the twin holds and where it breaks: fewer views, pose noise, training scale, a
     /// textureless building and mask noise, each moved alone from a baseline run.
     Stability(stability::StabilityArgs),
+    /// A real segmenter's masks: the crack model on the crack photos (IoU, precision / recall
+    /// within 2 px by scale and tile, seconds per megapixel) and on the demo building, alone and
+    /// through a label-mode twin trained on them.
+    Segment(segment::SegmentStudyArgs),
 }
 
 pub fn run(study: Study) -> anyhow::Result<()> {
@@ -28,6 +33,7 @@ pub fn run(study: Study) -> anyhow::Result<()> {
         Study::Hierarchy(args) => hierarchy::run(args),
         Study::Budget(args) => budget::run(args),
         Study::Stability(args) => stability::run(args),
+        Study::Segment(args) => segment::run(args),
     }
 }
 
