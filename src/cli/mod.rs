@@ -10,6 +10,7 @@ mod eval;
 mod export;
 mod inspect;
 mod launch;
+mod masks;
 mod refine;
 mod render;
 mod report;
@@ -49,6 +50,10 @@ enum Command {
     Refine(refine::Args),
     /// Prune a model to its most important Gaussians and fine-tune it briefly (JSON report).
     Compact(compact::Args),
+    /// Damage masks from COCO JSON, LabelMe JSON or class PNGs into a dataset (import), and a
+    /// twin's rendered masks out as COCO JSON (export).
+    #[command(subcommand)]
+    Masks(masks::Masks),
     /// Render one view of a model to a PNG.
     Render(render::Args),
     /// Write a model for other viewers as SPZ (compressed) or PLY, with its bytes per Gaussian.
@@ -89,6 +94,7 @@ pub fn main() -> ExitCode {
         Some(Command::Eval(args)) => eval::run(args),
         Some(Command::Refine(args)) => refine::run(args),
         Some(Command::Compact(args)) => compact::run(args),
+        Some(Command::Masks(command)) => masks::run(command),
         Some(Command::Render(args)) => render::run(args),
         Some(Command::Export(args)) => export::run(args),
         Some(Command::Report(args)) => report::run(args),

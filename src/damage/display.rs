@@ -12,7 +12,7 @@ use crate::damage::layer::{DamageLayer, display_splats};
 use crate::raster::{RenderSettings, render};
 use crate::scene::atomic::write_atomic;
 use crate::scene::load::save_mask_png;
-use crate::scene::{Camera, DamageClass, RgbImage, SceneError};
+use crate::scene::{Camera, DamageClass, Mask, RgbImage, SceneError};
 use crate::splats::Splats;
 use crate::train::job::{Job, JobOptions};
 
@@ -113,18 +113,13 @@ pub fn render_still(splats: &Splats, request: &RenderRequest) -> Result<Rendered
     render_png(&request.out, splats, &request.camera, &request.style)?;
     let mut masks = Vec::new();
     if let Some(readout) = &request.masks {
-        let (splats, readout) = readout.prepare(splats);
-        let out = render(
-            &splats,
-            &request.camera,
-            &RenderSettings::new(request.style.background, splats.sh_degree),
-        );
+        let rendered = rendered_masks(splats, &request.camera, readout, request.style.background);
         let stem = request
             .out
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "render".into());
-        for (&class, mask) in DamageClass::ALL.iter().zip(predicted_masks(&out, &readout)) {
+        for (&class, mask) in DamageClass::ALL.iter().zip(rendered) {
             let path = request.out.with_file_name(format!("{stem}_{class}.png"));
             save_mask_png(&path, &mask)?;
             masks.push(WrittenMask {
@@ -140,6 +135,24 @@ pub fn render_still(splats: &Splats, request: &RenderRequest) -> Result<Rendered
         height: request.camera.intrinsics.height,
         masks,
     })
+}
+
+/// The twin's damage masks seen from `camera` (per class in `DamageClass::ALL` order), read
+/// from a plain render (no damage layer, which would colour what is read back) as `readout`
+/// says: what `render --masks` writes and `masks export` hands to annotation tools.
+pub fn rendered_masks(
+    splats: &Splats,
+    camera: &Camera,
+    readout: &DamageReadout,
+    background: Vec3,
+) -> Vec<Mask> {
+    let (splats, readout) = readout.prepare(splats);
+    let out = render(
+        &splats,
+        camera,
+        &RenderSettings::new(background, splats.sh_degree),
+    );
+    predicted_masks(&out, &readout)
 }
 
 /// `render_still` as a job.

@@ -39,6 +39,11 @@ pub const MAX_TRANSFORMS_BYTES: u64 = 256 << 20;
 /// Largest `twin.ron` read: a project file lists paths and settings, a few KB per survey.
 pub const MAX_PROJECT_BYTES: u64 = 16 << 20;
 
+/// Largest annotation file read (COCO or LabelMe JSON). COCO's own `instances_train2017.json`
+/// (118 000 images, 860 000 polygon and RLE annotations) is 448 MB; 1 GiB holds any survey's
+/// annotations while a file claiming more is refused before it is read.
+pub const MAX_ANNOTATION_BYTES: u64 = 1 << 30;
+
 /// Checks a camera or image size against `MAX_IMAGE_SIDE` and `MAX_IMAGE_PIXELS` (both sides at
 /// least 1); the error says what is wrong, the caller adds the file.
 pub fn check_image_size(width: u64, height: u64) -> Result<(), String> {

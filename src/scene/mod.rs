@@ -11,6 +11,7 @@ pub mod files;
 pub mod image;
 pub mod limits;
 pub mod load;
+pub mod mask_import;
 pub mod mask_source;
 pub mod masks;
 pub mod open;
