@@ -11,6 +11,7 @@ mod export;
 mod inspect;
 mod launch;
 mod masks;
+mod pose;
 mod refine;
 mod render;
 mod report;
@@ -41,6 +42,8 @@ enum Command {
     Inspect(inspect::Args),
     /// Generate the procedural damaged building and its two drone surveys (the demo data).
     Synth(synth::Args),
+    /// Pose a folder of photos with COLMAP and write a dataset (metres and north from EXIF GPS).
+    Pose(pose::Args),
     /// Train a splat model from a dataset (CPU engine); writes model.ply, metrics.json, curve.csv.
     Train(train::Args),
     /// PSNR and SSIM of a model on a dataset's held-out views.
@@ -90,6 +93,7 @@ pub fn main() -> ExitCode {
         None => launch::demo_window(),
         Some(Command::Inspect(args)) => inspect::run(args),
         Some(Command::Synth(args)) => synth::run(args),
+        Some(Command::Pose(args)) => pose::run(args),
         Some(Command::Train(args)) => train::run(args),
         Some(Command::Eval(args)) => eval::run(args),
         Some(Command::Refine(args)) => refine::run(args),

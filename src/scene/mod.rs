@@ -19,6 +19,8 @@ pub mod ply;
 pub mod points;
 pub mod project;
 pub mod run_folder;
+pub mod sfm;
+pub mod similarity;
 pub mod survey_name;
 pub mod transforms;
 pub mod undistort;

@@ -9,6 +9,7 @@ use anyhow::Context;
 
 use damage_twin::damage::setup::{COARSE_SCALE, RunConfig, train_job};
 use damage_twin::scene::ImageScale;
+use damage_twin::scene::sfm::Georeference;
 use damage_twin::timeline::Twin;
 use damage_twin::timeline::record::record_training;
 use damage_twin::timeline::update::tag_damage;
@@ -52,6 +53,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut twin = Twin::create(&args.dir)?.with_writer(args.lock.writer("twin new"));
     twin.add_survey(&args.survey, &args.date, &args.dataset)?;
     twin.project.settings.scale = args.scale;
+    // A dataset posed from GPS or control points (`damage-twin pose`) carries its metres: the
+    // project's one scale is set from it, so no `set-scale` is needed.
+    if let Some(georef) = Georeference::read(&args.dataset)? {
+        twin.project.settings.metres_per_unit = Some(georef.metres_per_unit());
+        println!(
+            "metres from the dataset's georeference ({:?}): {:.5} m per unit, residual {:.2} m RMS",
+            georef.source,
+            georef.metres_per_unit(),
+            georef.rms_m
+        );
+    }
     let (mut model, trained) = match &args.model {
         Some(path) => (read_model(path)?, None),
         None => {

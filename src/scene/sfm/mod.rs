@@ -1,0 +1,27 @@
+//! From a folder of photos to a posed dataset: COLMAP is the structure-from-motion engine (it is
+//! driven, never re-implemented), and this module turns its output into a dataset the rest of the
+//! project opens, with metres and north from the photos' GPS or from surveyed control points.
+//!
+//! - `engine`: finding `colmap`, running one of its commands with the log kept and progress read
+//!   from its own output, failures reported with the command and its last lines.
+//! - `progress`: COLMAP's log lines as progress (stage, done, total).
+//! - `pose`: the pipeline (stage, extract, match, map, largest component, dataset, commit).
+//! - `exif`: the photos' focal length and GPS position.
+//! - `georef`: the similarity from the SfM frame to a local east-north-up frame in metres.
+//! - `control`: surveyed control points (CSV) and the fit to them, with check points.
+//!
+//! docs/POSE.md has the measurements that chose the engine and its settings.
+
+pub mod control;
+pub mod engine;
+pub mod error;
+pub mod exif;
+pub mod georef;
+pub mod pose;
+pub mod progress;
+
+pub use engine::Colmap;
+pub use error::SfmError;
+pub use georef::{Georeference, GeorefSource};
+pub use pose::{Matching, PoseOptions, PoseSummary, pose_photos};
+pub use progress::{Progress, Stage};

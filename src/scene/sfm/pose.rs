@@ -1,0 +1,549 @@
+//! `pose`: a folder of photos to a posed dataset, COLMAP doing the structure from motion.
+//!
+//! The dataset is staged beside its target (`scene::run_folder`) and put in its place only when
+//! complete, so a failure or a kill never leaves a folder that looks like a dataset:
+//!
+//! ```text
+//! DATASET/images/…            the registered photos, as taken (hard links or copies)
+//! DATASET/masks/…             the masks found beside the photos, as they were
+//! DATASET/sparse/0/*.bin      COLMAP's largest registered component (SIMPLE_RADIAL camera)
+//! DATASET/colmap/             COLMAP's database, every component it made, and colmap.log
+//! DATASET/pose.json           what ran and what came of it (PoseSummary)
+//! DATASET/georef.json         SfM frame → metres east/north/up, from control points when
+//!                             given (`control_points.json`: every point's residual), else GPS
+//! ```
+//!
+//! Undistortion: the camera keeps COLMAP's lens model and `Dataset::open` / `load_view` remove
+//! it on load with one map for the photo and every mask of the view (`scene::undistort`), so the
+//! masks beside the photos need no second resampling and stay exactly as drawn.
+
+use std::ffi::OsString;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::DVec3;
+use serde::Serialize;
+
+use crate::scene::atomic::write_atomic;
+use crate::scene::colmap::{self, ColmapModel};
+use crate::scene::files::{EntryBudget, image_size, walk_files};
+use crate::scene::limits::MAX_LISTED_ENTRIES;
+use crate::scene::open::{list_images, stem_of};
+use crate::scene::run_folder::RunFolder;
+use crate::scene::sfm::control::{
+    CONTROL_FIT_FILE, ControlFit, fit_control_points, read_control_points,
+};
+use crate::scene::sfm::engine::Colmap;
+use crate::scene::sfm::exif::{PhotoExif, read_photo_exif};
+use crate::scene::sfm::georef::{Georeference, fit_gps};
+use crate::scene::sfm::progress::{Progress, Stage};
+use crate::scene::sfm::SfmError;
+use crate::scene::SceneError;
+
+/// How image pairs are chosen for matching.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Matching {
+    /// Every pair: best for small sets (cost grows with the square of the count).
+    Exhaustive,
+    /// Each photo with the next ones in file-name order: drone strips, walks along a street.
+    Sequential,
+    /// Each photo with its nearest neighbours by EXIF GPS position.
+    Spatial,
+}
+
+impl Matching {
+    /// The default for `photos` photos: exhaustive up to `EXHAUSTIVE_UP_TO`, then sequential
+    /// (photos in capture order, as drones and walks take them). On lund's 29 photos sequential
+    /// matching with an overlap of 10 looks at about as many pairs as exhaustive and is what
+    /// was measured (docs/POSE.md); spatial matching is a choice (`--matching spatial`), since
+    /// phone GPS good to 10 m finds no closer neighbours than the file order does.
+    pub fn default_for(photos: usize) -> Matching {
+        if photos <= EXHAUSTIVE_UP_TO {
+            Matching::Exhaustive
+        } else {
+            Matching::Sequential
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Matching::Exhaustive => "exhaustive",
+            Matching::Sequential => "sequential",
+            Matching::Spatial => "spatial",
+        }
+    }
+}
+
+/// Photos up to which every pair is matched by default.
+pub const EXHAUSTIVE_UP_TO: usize = 20;
+
+/// Settings of a `pose` run.
+#[derive(Clone, Debug)]
+pub struct PoseOptions {
+    /// `None`: `Matching::default_for` the set.
+    pub matching: Option<Matching>,
+    /// CPU threads COLMAP may use.
+    pub threads: usize,
+    /// SIFT features per photo (COLMAP's default is 8192; fewer matches faster).
+    pub max_features: usize,
+    /// Photos each photo is matched with in sequential matching.
+    pub sequential_overlap: usize,
+    /// Surveyed control points (`control`): their fit replaces the GPS georeference.
+    pub control_points: Option<PathBuf>,
+}
+
+impl Default for PoseOptions {
+    fn default() -> Self {
+        PoseOptions {
+            matching: None,
+            threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            max_features: 8192,
+            sequential_overlap: 10,
+            control_points: None,
+        }
+    }
+}
+
+/// What a `pose` run did, written as `pose.json` in the dataset.
+#[derive(Clone, Debug, Serialize)]
+pub struct PoseSummary {
+    pub engine: String,
+    pub matching: Matching,
+    pub photos: usize,
+    /// Photos in the chosen (largest) component, and the ones left out of it.
+    pub registered: Vec<String>,
+    pub unregistered: Vec<String>,
+    /// Registered photos of every component COLMAP made, largest first.
+    pub components: Vec<usize>,
+    pub points: usize,
+    /// Mean reprojection error of the chosen component's points, pixels.
+    pub mean_reprojection_error_px: f64,
+    pub georeference: Option<Georeference>,
+    /// The control-point fit with every point's residual, when control points were given.
+    pub control_points: Option<ControlFit>,
+    /// Why the dataset has no georeference, when it has none.
+    pub georeference_note: Option<String>,
+    pub seconds: f64,
+    /// Things the user should know (photos without EXIF, masks not used for matching).
+    pub warnings: Vec<String>,
+}
+
+/// The dataset's summary file.
+pub const SUMMARY_FILE: &str = "pose.json";
+/// COLMAP's log inside the dataset.
+pub const LOG_FILE: &str = "colmap/colmap.log";
+
+/// Runs COLMAP on the photos in `photos` (not its sub-folders) and writes the dataset `out`,
+/// which must not exist yet or be an empty folder. `progress` is called from COLMAP's output.
+pub fn pose_photos(
+    photos: &Path,
+    out: &Path,
+    options: &PoseOptions,
+    progress: &dyn Fn(Progress),
+) -> Result<PoseSummary, SfmError> {
+    let start = Instant::now();
+    let files = list_photos(photos)?;
+    check_target(out)?;
+    if let Some(csv) = &options.control_points {
+        // A malformed file fails now, not after COLMAP's minutes.
+        read_control_points(csv)?;
+    }
+    let colmap = Colmap::find()?;
+    let exif: Vec<PhotoExif> = files.iter().map(|f| read_photo_exif(f)).collect();
+    let matching = options
+        .matching
+        .unwrap_or_else(|| Matching::default_for(files.len()));
+    let mut warnings = Vec::new();
+    let without_focal = exif.iter().filter(|e| e.focal_35mm.is_none()).count();
+    if without_focal > 0 {
+        warnings.push(format!(
+            "{without_focal} of {} photos have no EXIF focal length: COLMAP starts from 1.2 × \
+             the image width and refines it",
+            files.len()
+        ));
+    }
+
+    let run = RunFolder::begin(out)?;
+    let work = run.path("colmap");
+    let images = run.path("images");
+    for dir in [&work, &images] {
+        std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
+    }
+    let log = run.path(LOG_FILE);
+    // A failure keeps COLMAP's log beside the target (the staging folder is removed), named so
+    // that it is not mistaken for a dataset.
+    let keep_log = |error: SfmError| -> SfmError {
+        let kept = failed_log_path(out);
+        if std::fs::copy(&log, &kept).is_ok() {
+            if let SfmError::EngineFailed {
+                command,
+                status,
+                tail,
+                ..
+            } = error
+            {
+                return SfmError::EngineFailed {
+                    command,
+                    status,
+                    tail,
+                    log: kept,
+                };
+            }
+        }
+        error
+    };
+    for file in &files {
+        link_or_copy(file, &images.join(file_name(file)))?;
+    }
+    let masks = copy_masks(photos, &run.path("masks"))?;
+    let ignore_masks = masks.as_ref().is_some_and(|m| {
+        files
+            .iter()
+            .all(|f| m.join(format!("{}.png", file_name(f))).is_file())
+    });
+    if masks.is_some() && !ignore_masks {
+        warnings.push(
+            "not every photo has an ignore mask (masks/<photo>.png): COLMAP extracts features \
+             from whole photos"
+                .into(),
+        );
+    }
+
+    let db = work.join("database.db");
+    let threads = options.threads.max(1).to_string();
+    let arg = |s: &str| OsString::from(s);
+    let path_arg = |p: &Path| p.as_os_str().to_owned();
+    let mut extract = vec![
+        arg("--database_path"),
+        path_arg(&db),
+        arg("--image_path"),
+        path_arg(&images),
+        arg("--ImageReader.single_camera"),
+        arg("1"),
+        arg("--ImageReader.camera_model"),
+        arg("SIMPLE_RADIAL"),
+        arg("--SiftExtraction.use_gpu"),
+        arg("0"),
+        arg("--SiftExtraction.num_threads"),
+        arg(&threads),
+        arg("--SiftExtraction.max_num_features"),
+        arg(&options.max_features.to_string()),
+    ];
+    if let Some(params) = focal_prior(&files, &exif) {
+        extract.extend([arg("--ImageReader.camera_params"), arg(&params)]);
+    }
+    if ignore_masks && let Some(m) = &masks {
+        extract.extend([arg("--ImageReader.mask_path"), path_arg(m)]);
+    }
+    let n = files.len();
+    let step = |command: &str, args: &[OsString]| {
+        colmap
+            .run(command, args, &log, n, progress)
+            .map_err(keep_log)
+    };
+    step("feature_extractor", &extract)?;
+    let mut match_args = vec![
+        arg("--database_path"),
+        path_arg(&db),
+        arg("--SiftMatching.use_gpu"),
+        arg("0"),
+        arg("--SiftMatching.num_threads"),
+        arg(&threads),
+    ];
+    let matcher = match matching {
+        Matching::Exhaustive => "exhaustive_matcher",
+        Matching::Sequential => {
+            match_args.extend([
+                arg("--SequentialMatching.overlap"),
+                arg(&options.sequential_overlap.to_string()),
+                arg("--SequentialMatching.quadratic_overlap"),
+                arg("1"),
+            ]);
+            "sequential_matcher"
+        }
+        Matching::Spatial => {
+            match_args.extend([arg("--SpatialMatching.is_gps"), arg("1")]);
+            "spatial_matcher"
+        }
+    };
+    step(matcher, &match_args)?;
+    let sparse = work.join("sparse");
+    std::fs::create_dir_all(&sparse).map_err(|e| SceneError::io(&sparse, e))?;
+    let mut map_args = vec![
+        arg("--database_path"),
+        path_arg(&db),
+        arg("--image_path"),
+        path_arg(&images),
+        arg("--output_path"),
+        path_arg(&sparse),
+        arg("--Mapper.num_threads"),
+        arg(&threads),
+    ];
+    map_args.extend(MAPPER_SETTINGS.iter().map(|s| arg(s)));
+    let no_overlap = || {
+        keep_log(SfmError::input(
+            photos,
+            format!(
+                "COLMAP registered no pair of photos (no good initial pair): the {n} photos do \
+                 not overlap enough to be posed together (log: {})",
+                failed_log_path(out).display()
+            ),
+        ))
+    };
+    match step("mapper", &map_args) {
+        Err(SfmError::EngineFailed { tail, .. }) if tail.contains("initial image pair") => {
+            return Err(no_overlap());
+        }
+        other => other?,
+    }
+
+    progress(Progress {
+        stage: Stage::Write,
+        done: 0,
+        total: 1,
+    });
+    let mut components = read_components(&sparse)?;
+    components.sort_by_key(|m| std::cmp::Reverse(m.images.len()));
+    let Some(model) = components.first().filter(|m| m.images.len() >= 2) else {
+        return Err(no_overlap());
+    };
+    let registered: Vec<String> = model.images.iter().map(|i| i.name.clone()).collect();
+    let unregistered: Vec<String> = files
+        .iter()
+        .map(|f| file_name(f))
+        .filter(|name| !registered.contains(name))
+        .collect();
+    for name in &unregistered {
+        let path = images.join(name);
+        std::fs::remove_file(&path).map_err(|e| SceneError::io(&path, e))?;
+    }
+    let model_dir = run.path("sparse/0");
+    std::fs::create_dir_all(&model_dir).map_err(|e| SceneError::io(&model_dir, e))?;
+    colmap::write_binary(&model_dir, model)?;
+
+    let (mut georeference, mut georeference_note) = georeference_from_gps(model, &files, &exif);
+    let control_points = match &options.control_points {
+        Some(csv) => {
+            let fit = fit_control_points(model, &model_dir, csv)?;
+            georeference = Some(fit.georeference.clone());
+            georeference_note = None;
+            let json = serde_json::to_string_pretty(&fit)
+                .map_err(|e| SceneError::invalid(run.path(CONTROL_FIT_FILE), e.to_string()))?;
+            write_atomic(&run.path(CONTROL_FIT_FILE), |w| w.write_all(json.as_bytes()))?;
+            Some(fit)
+        }
+        None => None,
+    };
+    if let Some(g) = &georeference {
+        g.write(run.staging())?;
+    }
+    let summary = PoseSummary {
+        engine: colmap.version(),
+        matching,
+        photos: n,
+        registered,
+        unregistered,
+        components: components.iter().map(|m| m.images.len()).collect(),
+        points: model.points.len(),
+        mean_reprojection_error_px: mean_error(model),
+        georeference,
+        control_points,
+        georeference_note,
+        seconds: start.elapsed().as_secs_f64(),
+        warnings,
+    };
+    let json = serde_json::to_string_pretty(&summary)
+        .map_err(|e| SceneError::invalid(run.path(SUMMARY_FILE), e.to_string()))?;
+    write_atomic(&run.path(SUMMARY_FILE), |w| w.write_all(json.as_bytes()))?;
+    run.commit()?;
+    Ok(summary)
+}
+
+/// Mapper settings beyond COLMAP's defaults, chosen by measurement on the lund photos
+/// (docs/POSE.md).
+/// COLMAP 3.8's defaults found no initial pair on lund; these relaxed ones register all of its
+/// photos within 0.3° of the shipped model.
+const MAPPER_SETTINGS: &[&str] = &[
+    "--Mapper.init_min_num_inliers",
+    "50",
+    "--Mapper.init_max_error",
+    "8",
+    "--Mapper.init_min_tri_angle",
+    "8",
+    "--Mapper.ba_refine_principal_point",
+    "0",
+];
+
+/// The shared camera's starting SIMPLE_RADIAL parameters `f,cx,cy,0` from the photos' EXIF
+/// 35 mm-equivalent focal length (`f = f35 / 36 mm × the longer side`), when every photo has
+/// one size and the photos that state a focal length agree. COLMAP 3.8 does not read that tag
+/// by itself: on lund (no make or model in EXIF) it starts from 1024 px instead of 996 and
+/// splits the street in two components (docs/POSE.md).
+fn focal_prior(files: &[PathBuf], exif: &[PhotoExif]) -> Option<String> {
+    let mut focals: Vec<f64> = exif.iter().filter_map(|e| e.focal_35mm).collect();
+    focals.sort_by(f64::total_cmp);
+    let median = *focals.get(focals.len() / 2)?;
+    if focals.iter().any(|f| (f - median).abs() > 0.5) {
+        return None;
+    }
+    let size = image_size(files.first()?).ok()?;
+    if files[1..].iter().any(|f| image_size(f).ok() != Some(size)) {
+        return None;
+    }
+    let (w, h) = (f64::from(size.0), f64::from(size.1));
+    let f = median / 36.0 * w.max(h);
+    Some(format!("{f:.2},{},{},0", w / 2.0, h / 2.0))
+}
+
+/// Where a failed run's COLMAP log is kept: beside the target, `<name>.pose-failed.log`.
+pub fn failed_log_path(out: &Path) -> PathBuf {
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "dataset".into());
+    out.with_file_name(format!("{name}.pose-failed.log"))
+}
+
+fn file_name(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// The photos (JPEG, PNG) directly in `dir`, sorted; at least 2, with distinct stems (masks
+/// and views are named by stem).
+fn list_photos(dir: &Path) -> Result<Vec<PathBuf>, SfmError> {
+    if !dir.is_dir() {
+        return Err(SfmError::input(dir, "not a folder of photos"));
+    }
+    let files = list_images(dir, &mut EntryBudget::new(MAX_LISTED_ENTRIES));
+    if files.len() < 2 {
+        return Err(SfmError::input(
+            dir,
+            format!(
+                "{} photo(s) (JPEG or PNG): structure from motion needs at least 2 overlapping \
+                 photos",
+                files.len()
+            ),
+        ));
+    }
+    let mut stems: Vec<String> = files.iter().map(|f| stem_of(f)).collect();
+    stems.sort();
+    if let Some(pair) = stems.windows(2).find(|w| w[0] == w[1]) {
+        return Err(SfmError::input(
+            dir,
+            format!(
+                "two photos are named {}.*: views and masks are named by the file stem",
+                pair[0]
+            ),
+        ));
+    }
+    Ok(files)
+}
+
+/// The target must not hold anything yet: `pose` never mixes a new model with old files.
+fn check_target(out: &Path) -> Result<(), SfmError> {
+    match std::fs::read_dir(out) {
+        Ok(mut entries) => {
+            if entries.next().is_some() {
+                return Err(SfmError::input(
+                    out,
+                    "exists and is not empty: choose a new folder for the dataset",
+                ));
+            }
+            Ok(())
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(SceneError::io(out, e).into()),
+    }
+}
+
+fn link_or_copy(from: &Path, to: &Path) -> Result<(), SceneError> {
+    if let Some(parent) = to.parent() {
+        std::fs::create_dir_all(parent).map_err(|e| SceneError::io(parent, e))?;
+    }
+    if std::fs::hard_link(from, to).is_ok() {
+        return Ok(());
+    }
+    std::fs::copy(from, to)
+        .map(|_| ())
+        .map_err(|e| SceneError::io(from, e))
+}
+
+/// The masks beside the photos (`PHOTOS/masks/`, or `masks/` next to a folder named `images`),
+/// copied (every PNG, keeping sub-folders) to `to`; `None` when there are none.
+fn copy_masks(photos: &Path, to: &Path) -> Result<Option<PathBuf>, SfmError> {
+    let beside = photos
+        .file_name()
+        .is_some_and(|n| n == "images")
+        .then(|| photos.with_file_name("masks"));
+    let Some(source) = std::iter::once(photos.join("masks"))
+        .chain(beside)
+        .find(|d| d.is_dir())
+    else {
+        return Ok(None);
+    };
+    let is_png = |p: &Path| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"));
+    let files = walk_files(
+        &source,
+        8,
+        &mut EntryBudget::new(MAX_LISTED_ENTRIES),
+        is_png,
+    );
+    for relative in &files {
+        link_or_copy(&source.join(relative), &to.join(relative))?;
+    }
+    Ok((!files.is_empty()).then(|| to.to_path_buf()))
+}
+
+/// Every model COLMAP's mapper wrote (`sparse/0`, `sparse/1`, …).
+fn read_components(sparse: &Path) -> Result<Vec<ColmapModel>, SfmError> {
+    let mut models = Vec::new();
+    let entries = std::fs::read_dir(sparse).map_err(|e| SceneError::io(sparse, e))?;
+    for entry in entries.flatten() {
+        let dir = entry.path();
+        if dir.join("cameras.bin").is_file() {
+            models.push(colmap::read_binary(&dir)?);
+        }
+    }
+    Ok(models)
+}
+
+fn mean_error(model: &ColmapModel) -> f64 {
+    let n = model.points.len().max(1) as f64;
+    model.points.iter().map(|p| p.error).sum::<f64>() / n
+}
+
+/// The georeference from the registered photos' GPS, or why there is none.
+fn georeference_from_gps(
+    model: &ColmapModel,
+    files: &[PathBuf],
+    exif: &[PhotoExif],
+) -> (Option<Georeference>, Option<String>) {
+    let mut centres = Vec::new();
+    for image in &model.images {
+        let Some(index) = files.iter().position(|f| file_name(f) == image.name) else {
+            continue;
+        };
+        let (Some(gps), Some((q, t))) = (exif[index].gps, image.pose()) else {
+            continue;
+        };
+        let (q, t) = (q.as_dquat(), t.as_dvec3());
+        let centre = -(q.inverse() * t);
+        // The camera's up (−y) in the model frame.
+        let up = q.inverse() * DVec3::NEG_Y;
+        centres.push((image.name.clone(), centre, up, gps));
+    }
+    if centres.is_empty() {
+        return (
+            None,
+            Some("no registered photo carries EXIF GPS: the dataset has no metres or north".into()),
+        );
+    }
+    match fit_gps(&centres) {
+        Ok(g) => (Some(g), None),
+        Err(why) => (None, Some(why)),
+    }
+}
