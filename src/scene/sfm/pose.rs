@@ -176,23 +176,21 @@ pub fn pose_photos(
     // that it is not mistaken for a dataset.
     let keep_log = |error: SfmError| -> SfmError {
         let kept = failed_log_path(out);
-        if std::fs::copy(&log, &kept).is_ok() {
-            if let SfmError::EngineFailed {
+        let copied = std::fs::copy(&log, &kept).is_ok();
+        match error {
+            SfmError::EngineFailed {
                 command,
                 status,
                 tail,
                 ..
-            } = error
-            {
-                return SfmError::EngineFailed {
-                    command,
-                    status,
-                    tail,
-                    log: kept,
-                };
-            }
+            } if copied => SfmError::EngineFailed {
+                command,
+                status,
+                tail,
+                log: kept,
+            },
+            other => other,
         }
-        error
     };
     for file in &files {
         link_or_copy(file, &images.join(file_name(file)))?;
