@@ -150,7 +150,6 @@ fn largest_eigenvector(mut a: [[f64; 4]; 4]) -> (f64, f64, f64, f64) {
     (v[0][best], v[1][best], v[2][best], v[3][best])
 }
 
-
 /// A trimmed fit (`fit_trimmed`): the similarity, which pairs it kept, and every pair's distance
 /// after it (in the `to` frame's units).
 #[derive(Clone, Debug, PartialEq)]
@@ -164,7 +163,13 @@ impl TrimmedFit {
     /// RMS distance of the kept pairs after the fit.
     pub fn rms(&self) -> f64 {
         let n = self.kept.len().max(1) as f64;
-        (self.kept.iter().map(|&i| self.residuals[i].powi(2)).sum::<f64>() / n).sqrt()
+        (self
+            .kept
+            .iter()
+            .map(|&i| self.residuals[i].powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt()
     }
 }
 

@@ -88,8 +88,8 @@ pub fn register(pairs: &[(Camera, Camera)]) -> Result<Registration, AlignError> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::{DQuat, Vec3};
     use crate::scene::Intrinsics;
+    use glam::{DQuat, Vec3};
 
     fn cameras(n: usize, seed: u64) -> Vec<Camera> {
         let k = Intrinsics {

@@ -91,7 +91,9 @@ pub fn read_control_points(path: &Path) -> Result<(ControlFrame, Vec<ControlPoin
         .map(|c| c.trim().to_ascii_lowercase())
         .collect();
     let frame = match columns.get(1..4) {
-        Some([a, b, c]) if (a.as_str(), b.as_str(), c.as_str()) == ("latitude", "longitude", "height") => {
+        Some([a, b, c])
+            if (a.as_str(), b.as_str(), c.as_str()) == ("latitude", "longitude", "height") =>
+        {
             ControlFrame::Geodetic
         }
         Some([a, b, c]) if (a.as_str(), b.as_str(), c.as_str()) == ("x", "y", "z") => {
@@ -130,7 +132,8 @@ pub fn read_control_points(path: &Path) -> Result<(ControlFrame, Vec<ControlPoin
                 })
         };
         let surveyed = DVec3::new(number(1)?, number(2)?, number(3)?);
-        if frame == ControlFrame::Geodetic && !(surveyed.x.abs() <= 90.0 && surveyed.y.abs() <= 180.0)
+        if frame == ControlFrame::Geodetic
+            && !(surveyed.x.abs() <= 90.0 && surveyed.y.abs() <= 180.0)
         {
             return Err(line_error(path, line, "latitude or longitude out of range"));
         }
@@ -140,7 +143,11 @@ pub fn read_control_points(path: &Path) -> Result<(ControlFrame, Vec<ControlPoin
             .is_some_and(|c| matches!(c.to_ascii_lowercase().as_str(), "1" | "yes" | "true"));
         let (name, image) = (fields[0].to_owned(), fields[4].to_owned());
         if name.is_empty() || image.is_empty() {
-            return Err(line_error(path, line, "a point name and an image name are needed"));
+            return Err(line_error(
+                path,
+                line,
+                "a point name and an image name are needed",
+            ));
         }
         match points.iter_mut().find(|p| p.name == name) {
             Some(p) => {
@@ -265,7 +272,10 @@ fn triangulate(
     if !(a.determinant().abs() > 1e-12) {
         return Err(SfmError::input(
             csv,
-            format!("point {}: its rays are parallel (photos taken from one place)", point.name),
+            format!(
+                "point {}: its rays are parallel (photos taken from one place)",
+                point.name
+            ),
         ));
     }
     let x = a.inverse() * b;
@@ -362,7 +372,10 @@ pub fn fit_control_points(
             altitude: origin.z,
             similarity,
             rms_m,
-            used: fit_indices.iter().map(|&i| points[i].name.clone()).collect(),
+            used: fit_indices
+                .iter()
+                .map(|&i| points[i].name.clone())
+                .collect(),
             rejected: Vec::new(),
             baseline_m,
             scale_uncertainty: rms_m / (baseline_m.max(1e-9) * (fit_count as f64).sqrt()),

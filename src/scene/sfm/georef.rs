@@ -207,7 +207,11 @@ pub fn fit_gps(centres: &[(String, DVec3, DVec3, GpsPosition)]) -> Result<Georef
     let mut similarity = trimmed.similarity;
     if is_nearly_collinear(&kept_to) {
         // Pairs `centre + up` ↔ `gps + (0, 0, 1)·length` hold the photos' mean up to ENU up.
-        let mean_up = centres.iter().map(|c| c.2).sum::<DVec3>().normalize_or_zero();
+        let mean_up = centres
+            .iter()
+            .map(|c| c.2)
+            .sum::<DVec3>()
+            .normalize_or_zero();
         let length_sfm = spread(&kept_from);
         let length_m = length_sfm * similarity.scale;
         let mut f = kept_from.clone();

@@ -22,6 +22,6 @@ pub mod progress;
 
 pub use engine::Colmap;
 pub use error::SfmError;
-pub use georef::{Georeference, GeorefSource};
+pub use georef::{GeorefSource, Georeference};
 pub use pose::{Matching, PoseOptions, PoseSummary, pose_photos};
 pub use progress::{Progress, Stage};

@@ -119,7 +119,10 @@ mod tests {
             p(Stage::Map, 14, 29)
         );
         assert_eq!(
-            parse_line(&format!("{glog}Registering image #5 (num_reg_frames=7)"), 29),
+            parse_line(
+                &format!("{glog}Registering image #5 (num_reg_frames=7)"),
+                29
+            ),
             p(Stage::Map, 7, 29)
         );
         assert_eq!(parse_line("Elapsed time: 0.123 [minutes]", 29), None);
