@@ -489,3 +489,72 @@ fn exported_twin_masks_import_back_identical() {
     );
     assert_eq!(damage_pixels[2], 0);
 }
+
+/// The viewer tints a snapped photo with its imported masks, or with the segmenter's
+/// probabilities where they exist (`probabilities/<class>/<stem>.png`), and leaves it as it is
+/// with the setting off.
+#[cfg(feature = "app")]
+#[test]
+fn the_viewer_shows_a_photo_with_its_mask_or_probability_over_it() {
+    use damage_twin::app::commands::Command;
+    use damage_twin::app::photo_damage::PhotoDamage;
+    use damage_twin::app::settings::Settings;
+    use damage_twin::app::state::{AppState, Photo};
+
+    let data = dataset();
+    let root = data.path();
+    let coco = root.join("annotations.json");
+    std::fs::write(&coco, coco_text(&polygon_json(), POLYGON_RLE_COUNTS, "")).unwrap();
+    let annotations = read_coco(&coco, &mapping()).unwrap();
+    write_annotations(&open(root), &annotations, &root.join("masks")).unwrap();
+    // View b's crack probability: 255 on the left half, 0 on the right.
+    std::fs::create_dir_all(root.join("probabilities/crack")).unwrap();
+    image::GrayImage::from_fn(W, H, |x, _| image::Luma([if x < 8 { 255 } else { 0 }]))
+        .save(root.join("probabilities/crack/b.png"))
+        .unwrap();
+
+    let photo = |mode: PhotoDamage, view: &str| {
+        let mut state = AppState::new(Settings {
+            photo_damage: mode,
+            ..Settings::default()
+        });
+        state.apply(Command::Open(root.to_path_buf()));
+        let start = std::time::Instant::now();
+        while state.scene.is_none() {
+            state.poll();
+            assert!(start.elapsed().as_secs() < 10, "{:?}", state.log);
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        let dataset = state.scene.as_ref().unwrap().dataset.clone().unwrap();
+        state.apply(Command::SnapToView(dataset.view_index(view).unwrap()));
+        loop {
+            state.poll();
+            if let Some(Photo::Loaded(image)) = state.snap.as_ref().map(|s| s.photo.clone()) {
+                return image;
+            }
+            assert!(start.elapsed().as_secs() < 10, "{:?}", state.log);
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+    };
+    let red = |image: &damage_twin::scene::RgbImage, x: u32, y: u32| {
+        let i = ((y * W + x) * 3) as usize;
+        image.data[i] - image.data[i + 1]
+    };
+    let grey = 90.0 / 255.0;
+    let plain = photo(PhotoDamage::Off, "a");
+    assert!(plain.data.iter().all(|&v| (v - grey).abs() < 0.01));
+    // Masks: the polygon's pixels (crack, red by default) tinted, the rest as it was.
+    let masked = photo(PhotoDamage::Masks, "a");
+    let reference = art_mask(&POLYGON_ART);
+    for y in 0..H {
+        for x in 0..W {
+            let tinted = red(&masked, x, y) > 0.3;
+            assert_eq!(tinted, reference.get(x, y), "pixel {x},{y}");
+        }
+    }
+    // Probabilities replace view b's crack mask (the RLE polygon): the left half tinted.
+    let probable = photo(PhotoDamage::Probabilities, "b");
+    assert!(red(&probable, 1, 1) > 0.3 && red(&probable, 14, 1) < 0.01);
+    let b_masks = photo(PhotoDamage::Masks, "b");
+    assert!(red(&b_masks, 1, 1) < 0.01 && red(&b_masks, 7, 3) > 0.3);
+}

@@ -10,6 +10,7 @@ pub mod files;
 pub mod frame_log;
 pub mod overlay;
 pub mod panels;
+pub mod photo_damage;
 pub mod resolution;
 pub mod scene_frame;
 pub mod settings;

@@ -81,6 +81,9 @@ pub struct Settings {
     pub survey_layout: SurveyLayout,
     /// Photos compared with the render show their ignore mask (ignored pixels dimmed, magenta).
     pub show_ignore_masks: bool,
+    /// Photos compared with the render show their damage masks or the segmenter's
+    /// probabilities (docs/MASKS.md).
+    pub photo_damage: crate::app::photo_damage::PhotoDamage,
     /// Photo opacity in blend mode.
     pub compare_blend: f32,
     pub training: TrainingSettings,
@@ -127,6 +130,7 @@ impl Default for Settings {
             compare_mode: CompareMode::Swipe,
             survey_layout: SurveyLayout::SideBySide,
             show_ignore_masks: true,
+            photo_damage: crate::app::photo_damage::PhotoDamage::Off,
             compare_blend: 0.5,
             training: TrainingSettings::default(),
             damage: DamageLayer::default(),

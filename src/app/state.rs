@@ -505,12 +505,18 @@ impl AppState {
             Command::ResetView => self.reset_view(),
             Command::UpdateSettings(settings) => {
                 let settings = settings.sanitised();
+                // What a snapped photo shows changed: load it again with the new settings.
+                let reload = (settings.photo_damage, settings.show_ignore_masks)
+                    != (self.settings.photo_damage, self.settings.show_ignore_masks);
                 self.camera.mode = settings.nav_mode;
                 self.camera.fov_y = settings.fov_deg.to_radians();
                 if let Some(scene) = &self.scene {
                     self.camera.fly_speed = scene.frame.camera_distance * 0.5 * settings.fly_speed;
                 }
                 self.settings = settings;
+                if let Some(view) = self.snap.as_ref().filter(|_| reload).map(|s| s.view) {
+                    self.snap_to(view);
+                }
             }
             Command::Notify(line) => self.log_line(line),
         }

@@ -10,6 +10,7 @@ use crossbeam_channel::Sender;
 
 use crate::app::commands::{Command, DialogKind};
 use crate::app::files::{self, OpenTarget};
+use crate::app::photo_damage::tint_damage;
 use crate::app::settings::Settings;
 use crate::app::state::{LoadedSurvey, WorkerResult};
 use crate::scene::open::OpenOptions;
@@ -141,13 +142,17 @@ pub fn dialog(kind: DialogKind, start: Option<PathBuf>, results: Sender<WorkerRe
 }
 
 /// Loads view `index`'s photo (at most `PHOTO_MAX_WIDTH` wide) for the comparison; with
-/// `show_ignore`, the pixels its ignore mask keeps out of training are dimmed towards magenta.
+/// `settings.show_ignore_masks`, the pixels its ignore mask keeps out of training are dimmed
+/// towards magenta; with `settings.photo_damage`, its damage is tinted over it in the damage
+/// layer's colours (`photo_damage`).
 pub fn load_photo(
     dataset: Arc<Dataset>,
     index: usize,
-    show_ignore: bool,
+    settings: &Settings,
     results: Sender<WorkerResult>,
 ) {
+    let show_ignore = settings.show_ignore_masks;
+    let (damage, colours) = (settings.photo_damage, settings.damage.colours);
     spawn("damage-twin-photo", move || {
         let width = dataset
             .views
@@ -164,7 +169,10 @@ pub fn load_photo(
         let result = dataset
             .load_view(index, scale)
             .or_else(|_| dataset.load_view(index, ImageScale::Factor(1)))
-            .map(|v| {
+            .map(|mut v| {
+                for problem in tint_damage(&dataset, index, &mut v, damage, colours) {
+                    eprintln!("warning: {problem}");
+                }
                 let mut image = v.image;
                 if let (true, Some(ignore)) = (show_ignore, &v.ignore) {
                     mark_ignored(&mut image, ignore);

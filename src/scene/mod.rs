@@ -17,6 +17,7 @@ pub mod masks;
 pub mod open;
 pub mod ply;
 pub mod points;
+pub mod probabilities;
 pub mod project;
 pub mod run_folder;
 pub mod sfm;

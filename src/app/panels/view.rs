@@ -5,6 +5,7 @@
 use crate::app::camera_controller::NavMode;
 use crate::app::commands::Command;
 use crate::app::panels::edit_settings;
+use crate::app::photo_damage::PhotoDamage;
 use crate::app::settings::{CompareMode, ViewportRenderer};
 use crate::app::state::AppState;
 use crate::damage::DamageClass;
@@ -76,6 +77,15 @@ impl ViewPanel {
                 ui.label("Ignore masks");
                 ui.checkbox(&mut s.show_ignore_masks, "")
                     .on_hover_text("Dim the parts of a photo its ignore mask keeps out of training");
+                ui.end_row();
+                ui.label("Damage on photo");
+                ui.horizontal(|ui| {
+                    ui.selectable_value(&mut s.photo_damage, PhotoDamage::Off, "off");
+                    ui.selectable_value(&mut s.photo_damage, PhotoDamage::Masks, "masks")
+                        .on_hover_text("The view's damage masks, as training reads them");
+                    ui.selectable_value(&mut s.photo_damage, PhotoDamage::Probabilities, "probabilities")
+                        .on_hover_text("The segmenter's probabilities (probabilities/<class>/), else the masks");
+                });
                 ui.end_row();
             });
             ui.collapsing("Damage layer", |ui| {

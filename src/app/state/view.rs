@@ -65,12 +65,7 @@ impl AppState {
         });
         match change_map {
             Some(path) => workers::load_picture(path, index, self.results_sender()),
-            None => workers::load_photo(
-                dataset,
-                index,
-                self.settings.show_ignore_masks,
-                self.results_sender(),
-            ),
+            None => workers::load_photo(dataset, index, &self.settings, self.results_sender()),
         }
     }
 }
