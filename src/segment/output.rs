@@ -8,22 +8,13 @@
 use std::path::{Path, PathBuf};
 
 use crate::scene::load::{load_image, save_grey_png, save_mask_png};
+use crate::scene::probabilities::probability_path;
 use crate::scene::{DamageClass, Mask};
 use crate::segment::{ProbabilityMap, SegmentError};
-
-/// The folder of the stored probabilities, beside `masks/`.
-pub const PROBABILITIES_FOLDER: &str = "probabilities";
 
 /// `<root>/masks/<class>/<name>.png`.
 pub fn mask_path(root: &Path, class: DamageClass, name: &str) -> PathBuf {
     root.join("masks")
-        .join(class.id())
-        .join(format!("{name}.png"))
-}
-
-/// `<root>/probabilities/<class>/<name>.png`.
-pub fn probability_path(root: &Path, class: DamageClass, name: &str) -> PathBuf {
-    root.join(PROBABILITIES_FOLDER)
         .join(class.id())
         .join(format!("{name}.png"))
 }
