@@ -129,7 +129,8 @@ fn a_long_jobs_commit_keeps_what_others_wrote_meanwhile() {
         .expect("another command commits");
 
     let report = serde_json::json!({"survey": "2025", "psnr": 30.0});
-    commit_update(&mut updating, "2025", &tiny_model(), &report, None).expect("update commits");
+    commit_update(&mut updating, "2025", &tiny_model(), &report, None, None)
+        .expect("update commits");
     let folder = updating
         .survey_dir("2025")
         .expect("survey 2025 exists")
@@ -175,7 +176,7 @@ fn racing_update_and_add_survey_commits_keep_both() {
                 let mut twin = Twin::open(&project).expect("opens");
                 both_read.wait();
                 let report = serde_json::json!({"survey": "base"});
-                commit_update(&mut twin, "base", &model, &report, None).map(|_| ())
+                commit_update(&mut twin, "base", &model, &report, None, None).map(|_| ())
             })
         };
         let mut twin = Twin::open(&project).expect("opens");

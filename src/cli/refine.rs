@@ -111,12 +111,23 @@ pub fn parse_classes(names: &[String]) -> anyhow::Result<Vec<DamageClass>> {
         .collect()
 }
 
+/// Every file or folder a refinement may write into its output folder: none of them is carried
+/// over from an earlier refinement there (scene::run_folder).
+const REFINE_OUTPUTS: &[&str] = &[
+    "hulls",
+    "before_*",
+    "after_*",
+    "selection.json",
+    "model.ply",
+    "metrics.json",
+];
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     let model = Arc::new(read_model(&args.model)?);
     let dataset = Arc::new(open_dataset(&args.dataset, args.images.background)?);
     // Staged beside the output folder and swapped in whole (scene::run_folder): a kill leaves
     // the previous refinement's files or this one's, and an unwritable place fails now.
-    let outputs = RunFolder::begin(&args.out)
+    let outputs = RunFolder::begin(&args.out, REFINE_OUTPUTS)
         .with_context(|| format!("preparing output folder {}", args.out.display()))?;
     std::fs::create_dir_all(outputs.path("hulls"))
         .with_context(|| format!("creating {}", args.out.join("hulls").display()))?;

@@ -17,6 +17,7 @@ use damage_twin::report::project_runs::project_runs;
 use damage_twin::report::tradeoff_chart::tradeoff_svg;
 use damage_twin::report::training_chart::training_svg;
 use damage_twin::scene::atomic::write_atomic;
+use damage_twin::scene::run_folder::remove_dead_temp_files;
 use damage_twin::synth::quantities::Quantities;
 use damage_twin::timeline::quantities::survey_quantities;
 use damage_twin::timeline::twin::{HISTORY_FILE, today};
@@ -47,6 +48,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let twin = super::twin::open(&args.dir)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
+    // A report killed while writing left its temporary files here. (The folder is not replaced
+    // whole as a run folder is: it may be any folder of the user's, the project's own included.)
+    for left in remove_dead_temp_files(&args.out, 0) {
+        eprintln!(
+            "{}: removed, left by a report that was killed",
+            left.display()
+        );
+    }
     let metres = twin.project.settings.metres_per_unit;
     let config = MeasureConfig::for_scale(metres.unwrap_or(1.0));
     let surveys = survey_quantities(&twin)?;

@@ -112,6 +112,11 @@ fn write_text(path: &std::path::Path, text: &str) -> anyhow::Result<()> {
         .with_context(|| format!("writing {}", path.display()))
 }
 
+/// Every file a training run may write into its output folder: none of them is carried over
+/// from an earlier run there (scene::run_folder), so an `appearance.json` of an `--appearance`
+/// run does not stay beside a model trained without.
+const TRAIN_OUTPUTS: &[&str] = &["model.ply", "curve.csv", "appearance.json", "metrics.json"];
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     let dataset = Arc::new(open_dataset(&args.dataset, args.run.images.background)?);
     let holdout = args.run.holdout.holdout();
@@ -119,7 +124,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The run's files are staged beside the output folder and swapped in whole at the end
     // (scene::run_folder): an unwritable place fails now, not after the run, and a kill at any
     // moment leaves the previous outputs or the new ones, never a mix.
-    let outputs = RunFolder::begin(&args.out)
+    let outputs = RunFolder::begin(&args.out, TRAIN_OUTPUTS)
         .with_context(|| format!("preparing output folder {}", args.out.display()))?;
 
     let palette = palette(&args.colours)?;

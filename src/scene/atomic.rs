@@ -26,6 +26,25 @@ pub fn write_atomic(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 ) -> Result<(), SceneError> {
+    write_pending(path, write)?.commit()
+}
+
+/// A new version of a file written and synced beside it under a temporary name, not yet in its
+/// place: `commit` renames it there. Dropped uncommitted, it is removed. A process killed in
+/// between leaves the temporary file, named with its process id (`.<name>.<pid>.<n>.tmp`), for
+/// whoever cleans up after it (`scene::run_folder::temp_file_pid`).
+#[derive(Debug)]
+pub struct PendingFile {
+    temp: PathBuf,
+    path: PathBuf,
+    committed: bool,
+}
+
+/// The first half of `write_atomic`: the bytes written and synced under a temporary name.
+pub fn write_pending(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+) -> Result<PendingFile, SceneError> {
     let temp = temp_path(path);
     let result = (|| -> std::io::Result<()> {
         let file = File::create(&temp)?;
@@ -33,16 +52,37 @@ pub fn write_atomic(
         write(&mut writer)?;
         writer.flush()?;
         let file = writer.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        drop(file);
-        std::fs::rename(&temp, path)?;
-        sync_parent(path);
-        Ok(())
+        file.sync_all()
     })();
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&temp);
-        SceneError::io(path, e)
-    })
+    match result {
+        Ok(()) => Ok(PendingFile {
+            temp,
+            path: path.to_path_buf(),
+            committed: false,
+        }),
+        Err(e) => {
+            let _ = std::fs::remove_file(&temp);
+            Err(SceneError::io(path, e))
+        }
+    }
+}
+
+impl PendingFile {
+    /// Puts the file in its place (one rename) and syncs the folder.
+    pub fn commit(mut self) -> Result<(), SceneError> {
+        std::fs::rename(&self.temp, &self.path).map_err(|e| SceneError::io(&self.path, e))?;
+        self.committed = true;
+        sync_parent(&self.path);
+        Ok(())
+    }
+}
+
+impl Drop for PendingFile {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_file(&self.temp);
+        }
+    }
 }
 
 /// fsyncs the folder holding `path` so the rename itself is durable. Best effort: some

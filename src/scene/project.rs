@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::scene::atomic::write_atomic;
+use crate::scene::atomic::{PendingFile, write_pending};
 use crate::scene::files::read_regular;
 use crate::scene::limits::{MAX_IMAGE_SIDE, MAX_PROJECT_BYTES};
 use crate::scene::survey_name::{BadSurveyName, check_survey_name, same_survey_name};
@@ -383,6 +383,13 @@ impl Project {
     /// Writes `twin.ron` atomically (temporary file, fsync, rename, fsync of the folder), in
     /// the current format version.
     pub fn save(&self, path: &Path) -> Result<(), SceneError> {
+        self.save_pending(path)?.commit()
+    }
+
+    /// `save` up to the rename: the new `twin.ron` written and synced beside the old one, put in
+    /// its place by `PendingFile::commit` (a twin commit renames it last, after its survey
+    /// folders).
+    pub fn save_pending(&self, path: &Path) -> Result<PendingFile, SceneError> {
         self.validate()
             .map_err(|m| SceneError::invalid(path, format!("cannot save: {m}")))?;
         let current = Project {
@@ -392,7 +399,7 @@ impl Project {
         let config = ron::ser::PrettyConfig::new().struct_names(true);
         let text = ron::ser::to_string_pretty(&current, config)
             .map_err(|e| SceneError::invalid(path, format!("cannot serialise: {e}")))?;
-        write_atomic(path, |w| {
+        write_pending(path, |w| {
             use std::io::Write;
             w.write_all(text.as_bytes())?;
             w.write_all(b"\n")

@@ -5,9 +5,15 @@
 //! run's folder complete — never a new `model.ply` beside the old `metrics.json`. Anything else
 //! the user kept in the folder (renders, notes, subfolders) is carried over as a tree of hard
 //! links, so the user's files are in the folder whichever side of the swap a kill lands on.
+//! Files the run owns (`begin`'s outputs: what it may write) are never carried, written or not:
+//! an `appearance.json` of an earlier `--appearance` run does not outlive it beside a model
+//! trained without.
 //!
 //! Stale staging folders of killed runs (their process gone) are removed when the next run on
-//! the same target begins.
+//! the same target begins (`clean_leftovers` for every target in a folder). A twin project
+//! commits several folders and its project file as one (`install`, then the project file's
+//! rename, then `Installed::finish`; `undo_installs` rolls back a commit killed before its
+//! project file was renamed).
 
 use std::fs;
 use std::io;
@@ -22,7 +28,7 @@ const OLD_TAG: &str = ".replaced-";
 /// that point of the commit, so tests can check what a kill there leaves behind.
 const ABORT_ENV: &str = "DAMAGE_TWIN_ABORT_AT";
 
-fn abort_point(point: &str) {
+pub fn abort_point(point: &str) {
     if std::env::var(ABORT_ENV).is_ok_and(|p| p == point) {
         std::process::abort();
     }
@@ -33,13 +39,26 @@ fn abort_point(point: &str) {
 pub struct RunFolder {
     target: PathBuf,
     staging: PathBuf,
+    /// The names the run owns (a name ending in `*`: every name it begins): never carried over.
+    outputs: Vec<String>,
+}
+
+/// A run folder in its target's place, the previous folder kept aside until `finish` (or put
+/// back by `undo`).
+#[derive(Debug)]
+pub struct Installed {
+    target: PathBuf,
+    staging: PathBuf,
+    old: Option<PathBuf>,
 }
 
 impl RunFolder {
     /// Creates the staging folder beside `target` (creating `target`'s parent if needed),
-    /// after cleaning up what killed runs left there. Fails now, before any work, when the
-    /// place is not writable.
-    pub fn begin(target: &Path) -> Result<RunFolder, SceneError> {
+    /// after cleaning up what killed runs left there. `outputs` are the names of every file or
+    /// folder the run may write (a trailing `*` matches every name it begins): they are never
+    /// carried over from the previous folder, so none outlives the run that wrote it. Fails now,
+    /// before any work, when the place is not writable.
+    pub fn begin(target: &Path, outputs: &[&str]) -> Result<RunFolder, SceneError> {
         // A link to a folder: the run replaces the folder it points at, not the link.
         let resolved;
         let target = if fs::symlink_metadata(target).is_ok_and(|m| m.file_type().is_symlink()) {
@@ -61,7 +80,8 @@ impl RunFolder {
         if target.exists() && !target.is_dir() {
             return Err(SceneError::invalid(target, "exists and is not a folder"));
         }
-        recover(&parent, &name, target);
+        // What killed runs on this target left (`clean_leftovers` for it alone).
+        clean(&parent, Some(&name));
         let staging = parent.join(format!(".{name}{STAGING_TAG}{}", std::process::id()));
         if staging.exists() {
             fs::remove_dir_all(&staging).map_err(|e| SceneError::io(&staging, e))?;
@@ -70,6 +90,21 @@ impl RunFolder {
         Ok(RunFolder {
             target: target.to_path_buf(),
             staging,
+            outputs: outputs.iter().map(|o| o.to_string()).collect(),
+        })
+    }
+
+    /// The run owns `name` too (see `begin`).
+    pub fn owns(&mut self, name: &str) {
+        if !self.outputs.iter().any(|o| o == name) {
+            self.outputs.push(name.to_string());
+        }
+    }
+
+    fn is_output(&self, name: &str) -> bool {
+        self.outputs.iter().any(|o| match o.strip_suffix('*') {
+            Some(prefix) => name.starts_with(prefix),
+            None => o == name,
         })
     }
 
@@ -91,6 +126,55 @@ impl RunFolder {
     /// Puts the staged files in the target's place, carrying over what else the target held.
     /// The files must already be complete (written and closed); this syncs them.
     pub fn commit(self) -> Result<(), SceneError> {
+        self.prepare()?;
+        if !self.target.exists() {
+            abort_point("before-swap");
+            fs::rename(&self.staging, &self.target).map_err(|e| SceneError::io(&self.target, e))?;
+            abort_point("after-swap");
+            sync_parent(&self.target);
+            return Ok(());
+        }
+        abort_point("before-swap");
+        let old = swap(&self.staging, &self.target)?;
+        abort_point("after-swap");
+        sync_parent(&self.target);
+        // The previous run's files and the links to the user's.
+        let _ = fs::remove_dir_all(&old);
+        Ok(())
+    }
+
+    /// `commit` up to the removal of the previous folder, which stays aside (`.<name>.replaced-
+    /// <pid>`) until `Installed::finish`, so that a commit of several folders and a project file
+    /// can still be undone. Two renames, never an exchange: which side of them a kill lands on
+    /// reads from the names alone (`undo_installs`).
+    pub fn install(self) -> Result<Installed, SceneError> {
+        self.prepare()?;
+        // A target that did not exist yet is an empty folder to put back, so that an undone
+        // install leaves no new folder either.
+        if !self.target.exists() {
+            fs::create_dir(&self.target).map_err(|e| SceneError::io(&self.target, e))?;
+        }
+        let old = old_path(&self.staging);
+        fs::rename(&self.target, &old).map_err(|e| SceneError::io(&self.target, e))?;
+        let old = Some(old);
+        abort_point("between-renames");
+        if let Err(e) = fs::rename(&self.staging, &self.target) {
+            if let Some(old) = &old {
+                let _ = fs::rename(old, &self.target);
+            }
+            return Err(SceneError::io(&self.target, e));
+        }
+        sync_parent(&self.target);
+        Ok(Installed {
+            target: self.target.clone(),
+            staging: self.staging.clone(),
+            old,
+        })
+    }
+
+    /// Syncs the staged files and carries over the user's other entries (a tree of hard links),
+    /// so the swap loses nothing and they are in the target on either side of it.
+    fn prepare(&self) -> Result<(), SceneError> {
         let staged = list(&self.staging).map_err(|e| SceneError::io(&self.staging, e))?;
         for name in &staged {
             let path = self.staging.join(name);
@@ -101,27 +185,62 @@ impl RunFolder {
             }
         }
         if !self.target.exists() {
-            abort_point("before-swap");
-            fs::rename(&self.staging, &self.target).map_err(|e| SceneError::io(&self.target, e))?;
-            abort_point("after-swap");
-            sync_parent(&self.target);
             return Ok(());
         }
-        // Carry over the user's other entries (a tree of hard links), so the swap loses nothing
-        // and they are in the target on either side of it.
         let kept = list(&self.target).map_err(|e| SceneError::io(&self.target, e))?;
-        for name in kept.iter().filter(|n| !staged.contains(n)) {
+        for name in kept
+            .iter()
+            .filter(|n| !staged.contains(n) && !self.is_output(n))
+        {
             abort_point("carrying");
             link_tree(&self.target.join(name), &self.staging.join(name))?;
         }
-        abort_point("before-swap");
-        let old = swap(&self.staging, &self.target)?;
-        abort_point("after-swap");
-        sync_parent(&self.target);
-        // The previous run's files and the links to the user's.
-        let _ = fs::remove_dir_all(&old);
         Ok(())
     }
+}
+
+impl Installed {
+    /// The previous folder removed: the new one stays.
+    pub fn finish(self) {
+        if let Some(old) = &self.old {
+            let _ = fs::remove_dir_all(old);
+        }
+    }
+
+    /// The previous folder put back in the target's place; the new one removed.
+    pub fn undo(self) {
+        if fs::rename(&self.target, &self.staging).is_ok() {
+            let _ = fs::remove_dir_all(&self.staging);
+        }
+        if let Some(old) = &self.old {
+            let _ = fs::rename(old, &self.target);
+        }
+    }
+}
+
+/// Undoes the installs (`RunFolder::install`) of process `pid`, killed before it finished them,
+/// in `parent`: each previous folder kept aside goes back in its target's place, and the new
+/// folder back to its staging name, for `clean_leftovers` to remove. Each step is one rename,
+/// so a kill while undoing leaves a state this undoes again. Returns the targets put back.
+pub fn undo_installs(parent: &Path, pid: u32) -> Vec<PathBuf> {
+    let mut restored = Vec::new();
+    for entry in list(parent).unwrap_or_default() {
+        let Some((name, entry_pid, true)) = leftover(&entry) else {
+            continue;
+        };
+        if entry_pid != pid {
+            continue;
+        }
+        let target = parent.join(name);
+        let staging = parent.join(format!(".{name}{STAGING_TAG}{pid}"));
+        if fs::symlink_metadata(&target).is_ok() && !staging.exists() {
+            let _ = fs::rename(&target, &staging);
+        }
+        if fs::rename(parent.join(&entry), &target).is_ok() {
+            restored.push(target);
+        }
+    }
+    restored
 }
 
 /// Recreates `from` at `to` with hard links to its files (copies where linking fails), its
@@ -208,54 +327,111 @@ fn exchange(a: &Path, b: &Path) -> io::Result<()> {
     }
 }
 
-/// Cleans up after killed runs on `target`: a missing target whose previous folder survives
-/// the two-rename swap is put back; stale staging and replaced folders are removed; stale
-/// temporary files of
-/// `scene::atomic` inside the target are removed. Best effort: a run must not fail because a
-/// dead run's leftovers could not be removed.
-fn recover(parent: &Path, name: &str, target: &Path) {
-    let Ok(entries) = list(parent) else { return };
-    let staging_prefix = format!(".{name}{STAGING_TAG}");
-    let old_prefix = format!(".{name}{OLD_TAG}");
+/// Cleans up after killed runs (their process gone) on every target in `parent`: a missing
+/// target whose previous folder survives a two-rename swap is put back; stale staging and
+/// replaced folders are removed; stale temporary files of `scene::atomic` inside each target
+/// (and its subfolders) are removed. Best effort: a run must not fail because a dead run's
+/// leftovers could not be removed. Returns what it removed or put back, for the user.
+pub fn clean_leftovers(parent: &Path) -> Vec<PathBuf> {
+    clean(parent, None)
+}
+
+fn clean(parent: &Path, only: Option<&str>) -> Vec<PathBuf> {
+    let mut cleaned = Vec::new();
+    let entries = list(parent).unwrap_or_default();
     for entry in &entries {
-        let (pid, is_old) = if let Some(pid) = entry.strip_prefix(&staging_prefix) {
-            (pid, false)
-        } else if let Some(pid) = entry.strip_prefix(&old_prefix) {
-            (pid, true)
-        } else {
+        let Some((name, pid, is_old)) = leftover(entry) else {
             continue;
         };
-        let Ok(pid) = pid.parse::<u32>() else {
-            continue;
-        };
-        if process_alive(pid) {
+        if only.is_some_and(|o| o != name) || process_alive(pid) {
             continue;
         }
         let stale = parent.join(entry);
-        if is_old && !target.exists() {
-            let _ = fs::rename(&stale, target);
+        let target = parent.join(name);
+        if is_old && fs::symlink_metadata(&target).is_err() {
+            if fs::rename(&stale, &target).is_ok() {
+                cleaned.push(target);
+            }
             continue;
         }
-        let _ = fs::remove_dir_all(&stale);
-    }
-    for entry in list(target).unwrap_or_default() {
-        if let Some(pid) = atomic_temp_pid(&entry)
-            && !process_alive(pid)
-        {
-            let _ = fs::remove_file(target.join(&entry));
+        if fs::remove_dir_all(&stale).is_ok() {
+            cleaned.push(stale);
         }
     }
+    for entry in &entries {
+        let target = parent.join(entry);
+        if only.is_some_and(|o| o != entry) || !target.is_dir() || leftover(entry).is_some() {
+            continue;
+        }
+        cleaned.extend(remove_dead_temp_files(&target, 1));
+    }
+    cleaned
+}
+
+/// Whether `clean_leftovers` would find anything in `parent` (without changing anything).
+pub fn has_leftovers(parent: &Path) -> bool {
+    list(parent)
+        .unwrap_or_default()
+        .iter()
+        .any(|entry| match leftover(entry) {
+            Some((_, pid, _)) => !process_alive(pid),
+            None => has_dead_temp_files(&parent.join(entry), 1),
+        })
+}
+
+fn has_dead_temp_files(dir: &Path, depth: u32) -> bool {
+    if !fs::symlink_metadata(dir).is_ok_and(|m| m.is_dir()) {
+        return false;
+    }
+    list(dir)
+        .unwrap_or_default()
+        .iter()
+        .any(|entry| match temp_file_pid(entry) {
+            Some(pid) => !process_alive(pid),
+            None => depth > 0 && has_dead_temp_files(&dir.join(entry), depth - 1),
+        })
+}
+
+/// Removes the `scene::atomic` temporary files of dead processes in `dir` and, `depth` levels
+/// down, in its subfolders (never through a link). Returns them.
+pub fn remove_dead_temp_files(dir: &Path, depth: u32) -> Vec<PathBuf> {
+    let mut removed = Vec::new();
+    for entry in list(dir).unwrap_or_default() {
+        let path = dir.join(&entry);
+        if let Some(pid) = temp_file_pid(&entry) {
+            if !process_alive(pid) && fs::remove_file(&path).is_ok() {
+                removed.push(path);
+            }
+        } else if depth > 0 && fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir()) {
+            removed.extend(remove_dead_temp_files(&path, depth - 1));
+        }
+    }
+    removed
+}
+
+/// A staging (`false`) or replaced (`true`) folder's target name and process id.
+fn leftover(entry: &str) -> Option<(&str, u32, bool)> {
+    let rest = entry.strip_prefix('.')?;
+    let (name, pid, is_old) = if let Some((name, pid)) = rest.rsplit_once(STAGING_TAG) {
+        (name, pid, false)
+    } else {
+        let (name, pid) = rest.rsplit_once(OLD_TAG)?;
+        (name, pid, true)
+    };
+    Some((name, pid.parse().ok()?, is_old))
 }
 
 /// The process id in a `scene::atomic` temporary name (`.<name>.<pid>.<n>.tmp`).
-fn atomic_temp_pid(entry: &str) -> Option<u32> {
+pub fn temp_file_pid(entry: &str) -> Option<u32> {
     let stem = entry.strip_prefix('.')?.strip_suffix(".tmp")?;
     let mut parts = stem.rsplitn(3, '.');
     let _unique = parts.next()?.parse::<u64>().ok()?;
     parts.next()?.parse().ok()
 }
 
-fn process_alive(pid: u32) -> bool {
+/// Whether process `pid` still runs (this one always does). Where that cannot be checked
+/// cheaply, only this process counts as running.
+pub fn process_alive(pid: u32) -> bool {
     if pid == std::process::id() {
         return true;
     }
@@ -303,7 +479,7 @@ mod tests {
     fn a_new_target_is_created_and_an_old_one_replaced_keeping_the_users_files() {
         let tmp = tempfile::tempdir().unwrap();
         let target = tmp.path().join("run");
-        let run = RunFolder::begin(&target).unwrap();
+        let run = RunFolder::begin(&target, &["model.ply", "metrics.json"]).unwrap();
         write(&run.path("model.ply"), "one");
         run.commit().unwrap();
         assert_eq!(fs::read_to_string(target.join("model.ply")).unwrap(), "one");
@@ -311,7 +487,7 @@ mod tests {
         write(&target.join("notes.txt"), "mine");
         fs::create_dir(target.join("renders")).unwrap();
         write(&target.join("renders/a.png"), "png");
-        let run = RunFolder::begin(&target).unwrap();
+        let run = RunFolder::begin(&target, &["model.ply", "metrics.json"]).unwrap();
         write(&run.path("model.ply"), "two");
         write(&run.path("metrics.json"), "{}");
         run.commit().unwrap();
@@ -337,7 +513,7 @@ mod tests {
         write(&real.join("model.ply"), "old");
         let link = tmp.path().join("link");
         std::os::unix::fs::symlink(&real, &link).unwrap();
-        let run = RunFolder::begin(&link).unwrap();
+        let run = RunFolder::begin(&link, &["model.ply"]).unwrap();
         write(&run.path("model.ply"), "new");
         run.commit().unwrap();
         assert!(
@@ -362,7 +538,7 @@ mod tests {
         fs::create_dir_all(&stale).unwrap();
         write(&stale.join("model.ply"), "new but never swapped in");
 
-        let run = RunFolder::begin(&target).unwrap();
+        let run = RunFolder::begin(&target, &["model.ply", "metrics.json"]).unwrap();
         assert!(!stale.exists());
         assert!(!target.join(format!(".model.ply.{dead}.0.tmp")).exists());
         assert_eq!(fs::read_to_string(target.join("model.ply")).unwrap(), "old");
@@ -377,14 +553,79 @@ mod tests {
         let old = tmp.path().join(format!(".run{OLD_TAG}{dead}"));
         fs::create_dir(&old).unwrap();
         write(&old.join("model.ply"), "old");
-        let _run = RunFolder::begin(&target).unwrap();
+        let _run = RunFolder::begin(&target, &["model.ply", "metrics.json"]).unwrap();
         assert_eq!(fs::read_to_string(target.join("model.ply")).unwrap(), "old");
+    }
+
+    /// A file the run owns and did not write this time (an earlier `--appearance` run's
+    /// `appearance.json`) is not carried beside the new model; the user's files are.
+    #[test]
+    fn a_file_the_run_owns_but_did_not_write_is_not_carried() {
+        let tmp = tempfile::tempdir().unwrap();
+        let target = tmp.path().join("run");
+        let outputs = ["model.ply", "appearance.json", "before_*"];
+        let run = RunFolder::begin(&target, &outputs).unwrap();
+        write(&run.path("model.ply"), "with appearance");
+        write(&run.path("appearance.json"), "[]");
+        write(&run.path("before_view-1.png"), "png");
+        run.commit().unwrap();
+        write(&target.join("notes.txt"), "mine");
+        let run = RunFolder::begin(&target, &outputs).unwrap();
+        write(&run.path("model.ply"), "without");
+        run.commit().unwrap();
+        assert_eq!(
+            list(&target).unwrap(),
+            vec!["model.ply".to_string(), "notes.txt".to_string()]
+        );
+    }
+
+    #[test]
+    fn an_install_is_finished_or_undone_and_a_dead_ones_undone_later() {
+        let tmp = tempfile::tempdir().unwrap();
+        let target = tmp.path().join("survey");
+        fs::create_dir(&target).unwrap();
+        write(&target.join("model.ply"), "old");
+        write(&target.join("notes.txt"), "mine");
+        let run = RunFolder::begin(&target, &["model.ply"]).unwrap();
+        write(&run.path("model.ply"), "new");
+        let installed = run.install().unwrap();
+        assert_eq!(fs::read_to_string(target.join("model.ply")).unwrap(), "new");
+        installed.undo();
+        assert_eq!(fs::read_to_string(target.join("model.ply")).unwrap(), "old");
+        assert_eq!(list(tmp.path()).unwrap(), vec!["survey".to_string()]);
+
+        let run = RunFolder::begin(&target, &["model.ply"]).unwrap();
+        write(&run.path("model.ply"), "new");
+        run.install().unwrap().finish();
+        assert_eq!(fs::read_to_string(target.join("model.ply")).unwrap(), "new");
+        assert_eq!(
+            fs::read_to_string(target.join("notes.txt")).unwrap(),
+            "mine"
+        );
+        assert_eq!(list(tmp.path()).unwrap(), vec!["survey".to_string()]);
+
+        // What a process killed between the two renames, or after them, left: undone by name.
+        let dead = u32::MAX - 1;
+        for both_renames in [false, true] {
+            let old = tmp.path().join(format!(".survey{OLD_TAG}{dead}"));
+            fs::rename(&target, &old).unwrap();
+            if both_renames {
+                fs::create_dir(&target).unwrap();
+                write(&target.join("model.ply"), "newer");
+            }
+            assert!(has_leftovers(tmp.path()));
+            assert_eq!(undo_installs(tmp.path(), dead), vec![target.clone()]);
+            clean_leftovers(tmp.path());
+            assert_eq!(fs::read_to_string(target.join("model.ply")).unwrap(), "new");
+            assert_eq!(list(tmp.path()).unwrap(), vec!["survey".to_string()]);
+            assert!(!has_leftovers(tmp.path()));
+        }
     }
 
     #[test]
     fn atomic_temp_names_give_their_pid() {
-        assert_eq!(atomic_temp_pid(".model.ply.4242.7.tmp"), Some(4242));
-        assert_eq!(atomic_temp_pid("model.ply"), None);
-        assert_eq!(atomic_temp_pid(".notes.tmp"), None);
+        assert_eq!(temp_file_pid(".model.ply.4242.7.tmp"), Some(4242));
+        assert_eq!(temp_file_pid("model.ply"), None);
+        assert_eq!(temp_file_pid(".notes.tmp"), None);
     }
 }

@@ -106,8 +106,8 @@ fn io(path: &Path, message: impl std::fmt::Display) -> TimelineError {
     }
 }
 
-/// Detects survey `name`'s changes against the twin before it, writes the change maps and
-/// `changes.json` and records the folder in the project (`record_changes`). `on_view(done, total)`
+/// Detects survey `name`'s changes against the twin before it, then writes the change maps and
+/// `changes.json` and records the folder in the project as one commit, under the project's lock. `on_view(done, total)`
 /// reports progress.
 pub fn detect_survey(
     twin: &mut Twin,
@@ -152,9 +152,8 @@ pub fn detect_survey(
         None
     };
     let detection = detect(&model, &dataset, &config, earlier.as_ref(), on_view)?;
-    twin.create_survey_dir(name)?;
-    let folder = twin.survey_file(name, CHANGES_DIR)?;
-    std::fs::create_dir_all(&folder).map_err(|e| io(&folder, e))?;
+    // The pictures are made before the lock is taken; the lock is held only to write them.
+    let mut pictures = Vec::with_capacity(detection.views.len());
     for view in &detection.views {
         let photo = dataset.load_view(view.index, options.scale)?;
         let picture = change_picture(
@@ -163,7 +162,7 @@ pub fn detect_survey(
             &palette.colours,
             twin.project.settings.new_damage_colour,
         );
-        crate::damage::display::save_png(&change_map_path(&folder, &view.name), &picture)?;
+        pictures.push((view.name.clone(), picture));
     }
     let last = detection.summary().cloned().unwrap_or_default();
     let new_damage = last
@@ -181,6 +180,7 @@ pub fn detect_survey(
             (class.clone(), figure)
         })
         .collect();
+    let folder = twin.survey_file(name, CHANGES_DIR)?;
     let summary = ChangeSummary {
         survey: name.to_string(),
         twin_of: previous,
@@ -190,11 +190,20 @@ pub fn detect_survey(
         steps: detection.steps,
         folder: folder.clone(),
     };
-    let path = folder.join(CHANGES_FILE);
     let json = serde_json::to_string_pretty(&summary)
-        .map_err(|e| io(&path, format!("cannot serialise the summary: {e}")))?;
-    write_atomic(&path, |w| std::io::Write::write_all(w, json.as_bytes()))?;
-    record_changes(twin, name, &folder)?;
+        .map_err(|e| io(&folder, format!("cannot serialise the summary: {e}")))?;
+    // One commit: the maps and `changes.json` replace the previous detection's (none of which
+    // stays) together with the record naming them, or nothing changes.
+    twin.commit(|twin| {
+        let staged = twin.output_path(name, CHANGES_DIR)?;
+        std::fs::create_dir_all(&staged).map_err(|e| io(&staged, e))?;
+        for (view, picture) in &pictures {
+            crate::damage::display::save_png(&change_map_path(&staged, view), picture)?;
+        }
+        let path = staged.join(CHANGES_FILE);
+        write_atomic(&path, |w| std::io::Write::write_all(w, json.as_bytes()))?;
+        set_changes(twin, name, &folder)
+    })?;
     Ok(summary)
 }
 
@@ -202,11 +211,13 @@ pub fn detect_survey(
 /// survey's record changes in the project as it is now, so whatever another command recorded
 /// while the detection ran stays.
 pub fn record_changes(twin: &mut Twin, name: &str, folder: &Path) -> Result<(), TimelineError> {
-    twin.commit(|twin| {
-        let index = twin.survey_index(name)?;
-        twin.project.surveys[index].changes = Some(twin.relative(folder));
-        Ok(())
-    })
+    twin.commit(|twin| set_changes(twin, name, folder))
+}
+
+fn set_changes(twin: &mut Twin, name: &str, folder: &Path) -> Result<(), TimelineError> {
+    let index = twin.survey_index(name)?;
+    twin.project.surveys[index].changes = Some(twin.relative(folder));
+    Ok(())
 }
 
 /// `detect_survey` as a job (the viewer's "detect changes"): progress per view; the project as

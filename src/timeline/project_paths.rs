@@ -59,35 +59,30 @@ impl Twin {
         Ok(Path::new(SURVEYS_DIR).join(&survey.name))
     }
 
-    /// `survey_dir`, created when missing.
-    pub(crate) fn create_survey_dir(&self, name: &str) -> Result<PathBuf, TimelineError> {
-        let folder = self.survey_dir(name)?;
-        std::fs::create_dir_all(&folder).map_err(|e| io(&folder, e))?;
-        Ok(folder)
-    }
-
     /// Copies survey `name`'s records (metrics, training history, change maps) from `source`,
     /// another project, into this project's folder for that survey and records them here: a
     /// project saved into a new folder ("save as") holds its own files rather than naming the
-    /// old project's. Files that are not regular files are skipped.
+    /// old project's. Files that are not regular files are skipped. Inside a `commit` they are
+    /// staged with the survey's other files.
     pub fn copy_survey_records(&mut self, source: &Twin, name: &str) -> Result<(), TimelineError> {
         let index = self.survey_index(name)?;
         let from = &source.project.surveys[source.survey_index(name)?];
-        self.create_survey_dir(name)?;
         let mut metrics = None;
         if let Some(file) = &from.metrics {
-            let to = self.survey_file(name, METRICS_FILE)?;
-            copy_file(&source.inside(file)?, &to)?;
-            metrics = Some(self.relative(&to));
+            copy_file(
+                &source.inside(file)?,
+                &self.output_path(name, METRICS_FILE)?,
+            )?;
+            metrics = Some(self.relative(&self.survey_file(name, METRICS_FILE)?));
         }
         let history = source.survey_file(name, HISTORY_FILE)?;
         if history.is_file() {
-            copy_file(&history, &self.survey_file(name, HISTORY_FILE)?)?;
+            copy_file(&history, &self.output_path(name, HISTORY_FILE)?)?;
         }
         let mut changes = None;
         if let Some(old) = &from.changes {
             let old = source.inside(old)?;
-            let new = self.survey_file(name, CHANGES_DIR)?;
+            let new = self.output_path(name, CHANGES_DIR)?;
             std::fs::create_dir_all(&new).map_err(|e| io(&new, e))?;
             for entry in std::fs::read_dir(&old).map_err(|e| io(&old, e))? {
                 let entry = entry.map_err(|e| io(&old, e))?;
@@ -95,7 +90,7 @@ impl Twin {
                     copy_file(&entry.path(), &new.join(entry.file_name()))?;
                 }
             }
-            changes = Some(self.relative(&new));
+            changes = Some(self.relative(&self.survey_file(name, CHANGES_DIR)?));
         }
         let survey = &mut self.project.surveys[index];
         survey.metrics = metrics;

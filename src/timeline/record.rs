@@ -11,6 +11,7 @@ use serde::{Deserialize, Deserializer, Serialize};
 
 use crate::damage::TrainMode;
 use crate::scene::ImageScale;
+use crate::timeline::twin::HISTORY_FILE;
 use crate::timeline::{TimelineError, Twin};
 use crate::train::history::History;
 use crate::train::run::TrainOutcome;
@@ -64,8 +65,10 @@ pub fn record_training(
     scale: ImageScale,
     history: Option<&History>,
 ) -> Result<PathBuf, TimelineError> {
-    if let Some(history) = history {
-        twin.save_history(name, history)?;
+    // A history of another training must not stay beside this record.
+    match history {
+        Some(history) => twin.save_history(name, history).map(drop)?,
+        None => twin.replaces(name, HISTORY_FILE)?,
     }
     twin.save_metrics(name, &TrainingRecord::of(outcome, mode, scale))
 }

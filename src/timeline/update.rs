@@ -18,7 +18,7 @@ use crate::splats::model::{NO_SURVEY, sigmoid};
 use crate::timeline::appearance::{fit_transform, unchanged_pixels};
 use crate::timeline::changes::without_near_floaters;
 use crate::timeline::seed::{SeedConfig, SeedReport, seed_new_damage};
-use crate::timeline::twin::{TimelineError, Twin};
+use crate::timeline::twin::{HISTORY_FILE, TimelineError, Twin};
 use crate::train::focus::{ViewLights, trained_or_created};
 use crate::train::history::{EvalSample, History};
 use crate::train::job::{Job, JobContext, JobError, JobOptions};
@@ -120,10 +120,12 @@ pub struct UpdateOutcome {
     pub cancelled: bool,
 }
 
-/// Writes an update's result into the project (`commit_update`). Returns the model's path.
+/// Writes an update's result into the project (`commit_update`), with the training `history`
+/// that made it. Returns the model's path.
 pub fn record_update(
     twin: &mut Twin,
     outcome: &UpdateOutcome,
+    history: Option<&History>,
 ) -> Result<std::path::PathBuf, TimelineError> {
     let report = &outcome.report;
     commit_update(
@@ -132,24 +134,32 @@ pub fn record_update(
         &outcome.splats,
         report,
         report.appearance,
+        history,
     )
 }
 
 /// The end of an update, as one commit (`Twin::commit`): survey `name`'s model, its
-/// `metrics.json` (`report`) and its light (no other survey's files or records) written into the
-/// project as it is now, re-read under its lock, so whatever another command recorded while the
-/// update trained stays. Returns the model's path.
+/// `metrics.json` (`report`), its training `history` and its light (no other survey's files or
+/// records) written into the project as it is now, re-read under its lock, so whatever another
+/// command recorded while the update trained stays. All or nothing: the three files replace the
+/// previous update's together or not at all (a previous `history.json` does not stay beside a
+/// model committed without one). Returns the model's path.
 pub fn commit_update(
     twin: &mut Twin,
     name: &str,
     splats: &Splats,
     report: &impl Serialize,
     appearance: Option<ColourTransform>,
+    history: Option<&History>,
 ) -> Result<std::path::PathBuf, TimelineError> {
     twin.commit(|twin| {
         let index = twin.survey_index(name)?;
         let path = twin.save_model(name, splats)?;
         twin.save_metrics(name, report)?;
+        match history {
+            Some(history) => twin.save_history(name, history).map(drop)?,
+            None => twin.replaces(name, HISTORY_FILE)?,
+        }
         twin.project.surveys[index].appearance = appearance;
         Ok(path)
     })
@@ -200,8 +210,9 @@ pub fn update_job(
     })
 }
 
-/// The update of `survey` written into the project when it finishes (`record_update`); the
-/// project as saved comes back with the outcome. A cancelled or failed update writes nothing.
+/// The update of `survey` written into the project when it finishes (`record_update`, with the
+/// job's progress as the model's training history); the project as saved comes back with the
+/// outcome. A cancelled or failed update writes nothing.
 pub fn update_project_job(
     mut twin: Twin,
     survey: String,
@@ -209,9 +220,12 @@ pub fn update_project_job(
     options: JobOptions,
 ) -> Job<(Twin, UpdateOutcome)> {
     Job::spawn("update", options, move |ctx| {
+        ctx.keep_history();
         let outcome = update(ctx, &twin, &survey, &config)?;
         if !outcome.cancelled {
-            record_update(&mut twin, &outcome).map_err(timeline_error)?;
+            let (mut history, seconds) = ctx.take_history();
+            outcome.report.record_scores(&mut history, seconds);
+            record_update(&mut twin, &outcome, Some(&history)).map_err(timeline_error)?;
         }
         Ok((twin, outcome))
     })

@@ -146,6 +146,9 @@ pub struct JobContext<'a> {
     last_snapshot: Option<Instant>,
     paused_since: Option<Instant>,
     cancelled: bool,
+    /// The progress kept as a training history since `keep_history` (a job that writes its own
+    /// record, as an update's commit does, keeps it with the model).
+    history: std::cell::RefCell<Option<(Instant, crate::train::history::History)>>,
 }
 
 /// The events a job's work sends (the final one is its return value).
@@ -180,6 +183,7 @@ impl<'a> JobContext<'a> {
             last_snapshot: None,
             paused_since: None,
             cancelled: false,
+            history: std::cell::RefCell::new(None),
         }
     }
 
@@ -190,7 +194,23 @@ impl<'a> JobContext<'a> {
 
     /// Reports progress; false when nobody listens any more (the work should stop).
     pub fn progress(&self, progress: Progress) -> bool {
+        if let Some((started, history)) = self.history.borrow_mut().as_mut() {
+            history.record_progress(&progress, started.elapsed().as_secs_f64());
+        }
         (self.send)(Update::Progress(progress))
+    }
+
+    /// From now on, progress is also kept as a training history (wall time from now).
+    pub fn keep_history(&mut self) {
+        *self.history.get_mut() = Some((Instant::now(), Default::default()));
+    }
+
+    /// The history kept since `keep_history` (empty without), and its wall time so far.
+    pub fn take_history(&mut self) -> (crate::train::history::History, f64) {
+        match self.history.get_mut().take() {
+            Some((started, history)) => (history, started.elapsed().as_secs_f64()),
+            None => Default::default(),
+        }
     }
 
     /// Reports a rolled-back training step.

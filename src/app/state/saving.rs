@@ -121,15 +121,18 @@ impl AppState {
                 survey.model = None;
             }
             twin.project = project;
-            for survey in &source.project.surveys {
-                twin.copy_survey_records(source, &survey.name)?;
-            }
             twin
         }
         .with_writer(viewer_writer(false));
         // Into the project as other commands left it: a survey added or a record written since
         // it was opened here stays; the surveys shown here are found by name.
         let written = twin.commit(|twin| {
+            // Into another folder: each survey's records are copied there with its model.
+            if !same_folder {
+                for survey in &source.project.surveys {
+                    twin.copy_survey_records(source, &survey.name)?;
+                }
+            }
             twin.project.classes = crate::damage::DamageClass::ALL
                 .iter()
                 .zip(self.settings.damage.colours)

@@ -437,10 +437,8 @@ impl AppState {
                     }
                 }
                 JobEvent::Finished(done) => {
-                    let history = std::mem::take(&mut job.history);
-                    let seconds = job.started.elapsed().as_secs_f64();
                     self.end_timeline_job();
-                    self.finish_timeline_job(survey, done, history, seconds);
+                    self.finish_timeline_job(survey, done);
                 }
                 JobEvent::Failed(error) => {
                     self.end_timeline_job();
@@ -469,13 +467,9 @@ impl AppState {
         }
     }
 
-    fn finish_timeline_job(
-        &mut self,
-        survey: usize,
-        done: Done,
-        mut history: History,
-        seconds: f64,
-    ) {
+    /// A finished job's result shown; the job itself committed it (an update with its training
+    /// history, `update_project_job`).
+    fn finish_timeline_job(&mut self, survey: usize, done: Done) {
         match done {
             Done::Detect(done) => {
                 let (twin, summary) = *done;
@@ -514,10 +508,6 @@ impl AppState {
                     "updated {} from {} in {:.0} s: {} new-damage Gaussians, {} old",
                     r.survey, r.previous, r.seconds, r.new_damage_gaussians, r.old_damage_gaussians
                 ));
-                r.record_scores(&mut history, seconds);
-                if let Err(e) = twin.save_history(&r.survey, &history) {
-                    self.log_line(format!("the update's training history was not kept: {e}"));
-                }
                 let model = Arc::new(outcome.splats);
                 let Some(t) = &mut self.timeline else {
                     return;

@@ -37,11 +37,18 @@ pub fn run(command: Twin) -> anyhow::Result<()> {
     }
 }
 
-/// Opens a project folder for the CLI.
+/// Opens a project folder for the CLI, saying what it cleaned up after a killed command.
 pub(crate) fn open(dir: &std::path::Path) -> anyhow::Result<damage_twin::timeline::Twin> {
     use anyhow::Context;
-    damage_twin::timeline::Twin::open(dir)
-        .with_context(|| format!("opening the twin project {}", dir.display()))
+    let twin = damage_twin::timeline::Twin::open(dir)
+        .with_context(|| format!("opening the twin project {}", dir.display()))?;
+    if !twin.recovered().is_empty() {
+        eprintln!(
+            "{}",
+            damage_twin::timeline::twin::cleanup_message(twin.dir(), twin.recovered())
+        );
+    }
+    Ok(twin)
 }
 
 /// Opens a project folder for a command that writes it, named `command` to other writers.

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 
 use damage_twin::damage::refine::Strategy;
 use damage_twin::timeline::update::{UpdateConfig, update_project_job};
-use damage_twin::train::history::History;
 
 use crate::cli::args::{JobArgs, LockArgs, ProjectScaleArgs, drive};
 
@@ -69,19 +68,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.gentle_rates {
         config.refine.lr = damage_twin::timeline::update::gentle_learning_rates();
     }
+    // The update's model, metrics and training history are committed together by the job.
     let job = update_project_job(twin, args.survey.clone(), config, args.job.options());
-    let started = std::time::Instant::now();
-    let mut history = History::default();
-    let (twin, outcome) = drive(job, "update", args.job.quiet, |p| {
-        history.record_progress(p, started.elapsed().as_secs_f64())
-    })?;
-    outcome
-        .report
-        .record_scores(&mut history, started.elapsed().as_secs_f64());
-    // The update is recorded already: a history that cannot be written only costs the chart.
-    if let Err(e) = twin.save_history(&args.survey, &history) {
-        eprintln!("warning: the update's training history was not kept: {e}");
-    }
+    let (twin, outcome) = drive(job, "update", args.job.quiet, |_| {})?;
     let path = twin
         .model_path(&args.survey)?
         .map_or_else(|| twin.survey_dir(&args.survey), Ok)?;

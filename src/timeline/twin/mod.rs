@@ -17,6 +17,7 @@ use crate::splats::Splats;
 use crate::splats::ply;
 use crate::timeline::lock::{LockError, ProjectLock, Writer};
 use crate::timeline::record::SurveyRecord;
+use crate::timeline::twin::staging::{Staged, recover_if_idle};
 use crate::train::history::History;
 
 /// File names inside a survey's folder.
@@ -71,6 +72,10 @@ pub struct Twin {
     base: Option<Project>,
     /// How this process's writes are named to other writers, and how long they wait.
     writer: Writer,
+    /// The survey folders the commit in progress writes (`staging`); empty outside one.
+    staged: Staged,
+    /// What this process cleaned up after a killed command when it opened the project.
+    recovered: Vec<PathBuf>,
 }
 
 /// Two twins are the same project in the same folder, whoever writes them.
@@ -94,6 +99,8 @@ impl Twin {
             project: Project::new(),
             base: None,
             writer: Writer::default(),
+            staged: Staged::default(),
+            recovered: Vec::new(),
         })
     }
 
@@ -108,12 +115,16 @@ impl Twin {
             };
             (dir, path.to_path_buf())
         };
+        // Before reading: a commit killed half-way is rolled back or its leftovers removed.
+        let recovered = recover_if_idle(&dir);
         let project = Project::load(&file)?;
         Ok(Twin {
             dir,
             base: Some(project.clone()),
             project,
             writer: Writer::default(),
+            staged: Staged::default(),
+            recovered,
         })
     }
 
@@ -147,6 +158,7 @@ impl Twin {
     /// part of a project is a `commit`.
     pub fn save(&mut self) -> Result<(), TimelineError> {
         let _lock = ProjectLock::acquire(&self.dir, &self.writer)?;
+        self.recover_locked();
         let file = self.file();
         let unchanged = match &self.base {
             Some(base) => &Project::load(&file)? == base,
@@ -167,11 +179,16 @@ impl Twin {
     /// commits only when it ends, so a survey added or a scale set while it ran survives. A new
     /// project (`create`) is refused when one appeared in its folder meanwhile. When `change`
     /// fails, `twin.ron` and this project stay as they were.
+    ///
+    /// All or nothing: the survey files `change` writes go into a staging folder per survey,
+    /// put in place with `twin.ron` at the end (`staging`); a kill at any moment leaves the
+    /// project as it was or as committed, and the next command cleans up (and says so).
     pub fn commit<T>(
         &mut self,
         change: impl FnOnce(&mut Twin) -> Result<T, TimelineError>,
     ) -> Result<T, TimelineError> {
         let _lock = ProjectLock::acquire(&self.dir, &self.writer)?;
+        self.recover_locked();
         let file = self.file();
         let mut current = self.clone();
         if self.base.is_some() {
@@ -179,10 +196,17 @@ impl Twin {
         } else if file.exists() {
             return Err(TimelineError::Exists { file });
         }
+        current.staged.committing = true;
         let result = change(&mut current)?;
-        current.write_project()?;
+        current.write_commit()?;
         *self = current;
         Ok(result)
+    }
+
+    /// What this process cleaned up after a killed command when it opened the project (the
+    /// CLI and the viewer tell the user).
+    pub fn recovered(&self) -> &[PathBuf] {
+        &self.recovered
     }
 
     /// Writes `twin.ron`; the caller holds the lock.
@@ -296,20 +320,20 @@ impl Twin {
         }
     }
 
-    /// Writes `splats` as survey `name`'s model (`surveys/<name>/model.ply`, atomically) and
-    /// records it in the project (saved by the next `save`). Only that survey's file is written:
-    /// every other survey's model stays as it is.
+    /// Writes `splats` as survey `name`'s model (`surveys/<name>/model.ply`; inside a `commit`
+    /// staged with the survey's other files, otherwise atomically on its own) and records it in
+    /// the project. Only that survey's file is written: every other survey's model stays as it is.
     pub fn save_model(&mut self, name: &str, splats: &Splats) -> Result<PathBuf, TimelineError> {
         let index = self.survey_index(name)?;
-        self.create_survey_dir(name)?;
+        let written = self.output_path(name, MODEL_FILE)?;
+        ply::write_splats(&written, splats)?;
         let path = self.survey_file(name, MODEL_FILE)?;
-        ply::write_splats(&path, splats)?;
         self.project.surveys[index].model = Some(self.relative(&path));
         Ok(path)
     }
 
-    /// Writes survey `name`'s metrics as pretty JSON (`surveys/<name>/metrics.json`, atomically)
-    /// and records the file in the project.
+    /// Writes survey `name`'s metrics as pretty JSON (`surveys/<name>/metrics.json`, written as
+    /// `save_model` writes) and records the file in the project.
     pub fn save_metrics(
         &mut self,
         name: &str,
@@ -332,8 +356,12 @@ impl Twin {
     }
 
     /// Writes the training history that made survey `name`'s model
-    /// (`surveys/<name>/history.json`, atomically).
-    pub fn save_history(&self, name: &str, history: &History) -> Result<PathBuf, TimelineError> {
+    /// (`surveys/<name>/history.json`, written as `save_model` writes).
+    pub fn save_history(
+        &mut self,
+        name: &str,
+        history: &History,
+    ) -> Result<PathBuf, TimelineError> {
         self.write_survey_json(name, HISTORY_FILE, history)
     }
 
@@ -347,18 +375,18 @@ impl Twin {
     }
 
     fn write_survey_json(
-        &self,
+        &mut self,
         name: &str,
         file: &str,
         value: &impl Serialize,
     ) -> Result<PathBuf, TimelineError> {
-        self.create_survey_dir(name)?;
+        let written = self.output_path(name, file)?;
         let path = self.survey_file(name, file)?;
         let text = serde_json::to_string_pretty(value).map_err(|e| TimelineError::Io {
             path: path.clone(),
             message: format!("cannot serialise: {e}"),
         })?;
-        write_atomic(&path, |w| std::io::Write::write_all(w, text.as_bytes()))?;
+        write_atomic(&written, |w| std::io::Write::write_all(w, text.as_bytes()))?;
         Ok(path)
     }
 
@@ -520,5 +548,7 @@ pub(crate) fn civil_date(days: i64) -> String {
     format!("{y:04}-{m:02}-{d:02}")
 }
 
+mod staging;
+pub use staging::cleanup_message;
 #[cfg(test)]
 mod tests;

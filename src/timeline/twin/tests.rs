@@ -50,7 +50,7 @@ fn surveys_keep_their_models_and_paths_are_relative() {
         .unwrap();
     twin.save().unwrap();
 
-    let reopened = Twin::open(&dir.join(PROJECT_FILE)).unwrap();
+    let mut reopened = Twin::open(&dir.join(PROJECT_FILE)).unwrap();
     assert_eq!(reopened, twin);
     assert_eq!(
         std::fs::read(dir.join("surveys/survey-1/model.ply")).unwrap(),
