@@ -165,7 +165,8 @@ pub fn pose_photos(
         ));
     }
 
-    let run = RunFolder::begin(out)?;
+    // Every name in a posed dataset is the pose run's: nothing of an earlier one is carried.
+    let run = RunFolder::begin(out, &["*"])?;
     let work = run.path("colmap");
     let images = run.path("images");
     for dir in [&work, &images] {
