@@ -46,9 +46,11 @@ impl Twin {
     /// over); outside one, in the survey folder itself (created when missing).
     pub fn output_path(&mut self, name: &str, file: &str) -> Result<PathBuf, TimelineError> {
         let target = self.survey_dir(name)?;
+        // Refused when the file in place is a link out of the project, staged or not.
+        let in_place = self.survey_file(name, file)?;
         if !self.staged.committing {
             std::fs::create_dir_all(&target).map_err(|e| super::io_error(&target, e))?;
-            return Ok(target.join(file));
+            return Ok(in_place);
         }
         let survey = self.project.surveys[self.survey_index(name)?].name.clone();
         let position = match self.staged.folders.iter().position(|(n, _)| *n == survey) {
