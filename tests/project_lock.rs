@@ -2,17 +2,19 @@
 //! no record, a held project refuses a second writer naming the holder, a lock file left by a
 //! killed process does not block. Quick: no training, a one-Gaussian model.
 
+mod project_support;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::sync::{Arc, Barrier};
 use std::time::Duration;
 
 use damage_twin::scene::project::PROJECT_FILE;
-use damage_twin::splats::Splats;
 use damage_twin::timeline::detect_survey::record_changes;
 use damage_twin::timeline::lock::{LOCK_FILE, ProjectLock, Writer};
 use damage_twin::timeline::update::commit_update;
 use damage_twin::timeline::{TimelineError, Twin};
+use project_support::one_gaussian;
 
 const RACES: usize = 50;
 
@@ -62,21 +64,6 @@ fn text(output: &Output) -> String {
         String::from_utf8_lossy(&output.stdout),
         String::from_utf8_lossy(&output.stderr)
     )
-}
-
-fn tiny_model() -> Splats {
-    let mut splats = Splats::empty(0, 0);
-    splats.push(
-        glam::Vec3::ZERO,
-        glam::Vec3::ZERO,
-        glam::Quat::IDENTITY,
-        0.0,
-        &[0.1, 0.2, 0.3],
-        &[],
-        0,
-        0,
-    );
-    splats
 }
 
 /// The reproducer: two `twin add-survey` on one project at once lost one survey in 10 of
@@ -129,7 +116,7 @@ fn a_long_jobs_commit_keeps_what_others_wrote_meanwhile() {
         .expect("another command commits");
 
     let report = serde_json::json!({"survey": "2025", "psnr": 30.0});
-    commit_update(&mut updating, "2025", &tiny_model(), &report, None, None)
+    commit_update(&mut updating, "2025", &one_gaussian(), &report, None, None)
         .expect("update commits");
     let folder = updating
         .survey_dir("2025")
@@ -165,7 +152,7 @@ fn a_long_jobs_commit_keeps_what_others_wrote_meanwhile() {
 #[test]
 fn racing_update_and_add_survey_commits_keep_both() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let model = Arc::new(tiny_model());
+    let model = Arc::new(one_gaussian());
     for race in 0..RACES {
         let root = dir.path().join(format!("race-{race}"));
         let project = project(&root);

@@ -5,13 +5,15 @@
 //! checks that every file outside the project keeps its bytes. No training: the model is a
 //! one-Gaussian PLY.
 
+mod project_support;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use damage_twin::scene::project::PROJECT_FILE;
-use damage_twin::splats::Splats;
 use damage_twin::timeline::Twin;
+use project_support::one_gaussian;
 
 /// Names that are paths, and names a file system folds onto `2024`'s folder.
 const PATH_NAMES: &[&str] = &[
@@ -26,21 +28,6 @@ const PATH_NAMES: &[&str] = &[
     "2024 ",
     ".2024",
 ];
-
-fn one_gaussian() -> Splats {
-    let mut splats = Splats::empty(0, 0);
-    splats.push(
-        glam::Vec3::ZERO,
-        glam::Vec3::ZERO,
-        glam::Quat::IDENTITY,
-        0.0,
-        &[0.1, 0.2, 0.3],
-        &[],
-        0,
-        0,
-    );
-    splats
-}
 
 /// A folder with a dataset folder, a model, and `outside/` holding a sentinel file where
 /// `surveys/../../outside` would land from a project at `root/projects/p`.

@@ -23,7 +23,7 @@ use damage_twin::train::views::Holdout;
 #[derive(clap::Args, Debug)]
 pub struct JobArgs {
     /// Worker threads (default: all cores, or RAYON_NUM_THREADS).
-    #[arg(long)]
+    #[arg(long, value_parser = parse_threads)]
     pub threads: Option<usize>,
     /// No progress bar (log lines only).
     #[arg(long)]
@@ -170,6 +170,22 @@ pub fn palette(overrides: &[String]) -> anyhow::Result<Palette> {
         palette.set_from_text(text).map_err(anyhow::Error::msg)?;
     }
     Ok(palette)
+}
+
+/// Most worker threads a job may ask for: sixteen times the largest servers' core counts. Every
+/// thread of a pool is spawned up front, so `--threads 100000` spent minutes spawning before
+/// any work (and could exhaust the process's thread limit).
+pub const MAX_THREADS: usize = 4096;
+
+/// `--threads N`: 1 to `MAX_THREADS`.
+pub fn parse_threads(text: &str) -> Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(n) if (1..=MAX_THREADS).contains(&n) => Ok(n),
+        Ok(n) => Err(format!(
+            "{n} threads: give 1 to {MAX_THREADS} (leave --threads out to use every core)"
+        )),
+        Err(_) => Err(format!("{text:?} is not a thread count")),
+    }
 }
 
 pub fn parse_scale(text: &str) -> Result<ImageScale, String> {

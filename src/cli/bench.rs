@@ -20,7 +20,7 @@ pub struct Args {
     // Not `JobArgs`: a benchmark draws no progress bar (it would take time from what it
     // measures), so it has no `--quiet`.
     /// Training threads (default: all cores, or RAYON_NUM_THREADS).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::args::parse_threads)]
     pub threads: Option<usize>,
 }
 

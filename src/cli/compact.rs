@@ -14,7 +14,9 @@ use damage_twin::scene::ImageScale;
 use damage_twin::train::job::JobOptions;
 use damage_twin::train::views::split_views;
 
-use super::args::{HoldoutArgs, drive, open_dataset, parse_background, parse_scale, read_model};
+use super::args::{
+    HoldoutArgs, drive, open_dataset, parse_background, parse_scale, parse_threads, read_model,
+};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -41,7 +43,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Worker threads (default: all cores).
-    #[arg(long)]
+    #[arg(long, value_parser = parse_threads)]
     pub threads: Option<usize>,
     /// No progress bar.
     #[arg(long)]
@@ -61,6 +63,15 @@ impl Budget {
         match self {
             Budget::Count(n) => n,
             Budget::Fraction(f) => (gaussians as f64 * f).round() as usize,
+        }
+    }
+}
+
+impl std::fmt::Display for Budget {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Budget::Count(n) => write!(f, "{n}"),
+            Budget::Fraction(x) => write!(f, "{x}"),
         }
     }
 }
@@ -114,6 +125,16 @@ struct Report {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let splats = read_model(&args.model)?;
+    let before = splats.len();
+    // A fraction that rounds to no Gaussian would write an empty model and exit 0.
+    let keep = args.budget.of(before);
+    if keep == 0 {
+        anyhow::bail!(
+            "--budget {}: keeps 0 of the {before} Gaussians of {}; keep at least one",
+            args.budget,
+            args.model.display()
+        );
+    }
     let dataset = Arc::new(open_dataset(&args.dataset, args.background)?);
     let holdout = args.holdout.holdout();
     let (_, test_idx) = split_views(&dataset, &holdout).map_err(anyhow::Error::msg)?;
@@ -126,10 +147,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.background,
         )?)
     };
-    let before = splats.len();
     let psnr_before = psnr(&splats)?;
     let config = CompactConfig {
-        keep: args.budget.of(before),
+        keep,
         iterations: args.iters,
         scale: args.scale,
         holdout,

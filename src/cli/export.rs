@@ -57,7 +57,25 @@ pub struct Args {
     pub damage_colours: bool,
 }
 
+/// Refuses an `--out` that is the model itself (the same file, by any path or link): the export
+/// would replace the user's PLY, damage channels and all, and nothing reads SPZ back.
+fn refuse_overwriting_the_model(args: &Args) -> anyhow::Result<()> {
+    let same = match (args.model.canonicalize(), args.out.canonicalize()) {
+        (Ok(model), Ok(out)) => model == out,
+        _ => false,
+    };
+    if same {
+        anyhow::bail!(
+            "--out {} is the model being exported ({}): writing it would replace the input;              choose another file",
+            args.out.display(),
+            args.model.display()
+        );
+    }
+    Ok(())
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
+    refuse_overwriting_the_model(&args)?;
     let format = output_format(&args);
     let mut splats = read_model(&args.model)?;
     let keep: Vec<bool> = splats

@@ -17,6 +17,8 @@ use damage_twin::report::project_runs::project_runs;
 use damage_twin::report::tradeoff_chart::tradeoff_svg;
 use damage_twin::report::training_chart::training_svg;
 use damage_twin::scene::atomic::write_atomic;
+use damage_twin::scene::files::{is_present, read_regular};
+use damage_twin::scene::limits::MAX_PROJECT_JSON_BYTES;
 use damage_twin::scene::run_folder::remove_dead_temp_files;
 use damage_twin::synth::quantities::Quantities;
 use damage_twin::timeline::quantities::survey_quantities;
@@ -32,10 +34,15 @@ pub struct Args {
     /// Renders per survey, from its photos' poses spread over the survey.
     #[arg(long, default_value_t = 4)]
     pub views: usize,
-    /// Renders are this many times smaller than the photos.
-    #[arg(long, default_value_t = 2)]
+    /// Renders are this many times smaller than the photos (1 to 64).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=MAX_DOWNSCALE))]
     pub downscale: u32,
 }
+
+/// Largest `--downscale`: a 32 768-pixel photo (`scene::limits::MAX_IMAGE_SIDE`) still renders
+/// 512 pixels wide. Checked when the arguments are parsed, before anything is measured (1000
+/// measured every survey and then failed on a render of zero width).
+const MAX_DOWNSCALE: i64 = 64;
 
 fn colour_name(colour: [u8; 3]) -> String {
     match colour {
@@ -76,10 +83,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let own_survey = twin.survey_index(&s.survey)?;
         let dataset = twin.open_survey_dataset(&s.survey)?;
         let truth_file = dataset.root.join("truth").join("quantities.json");
-        if truth_file.is_file() {
-            let text = std::fs::read_to_string(&truth_file)
-                .with_context(|| format!("reading {}", truth_file.display()))?;
-            let q: Quantities = serde_json::from_str(&text)
+        if is_present(&truth_file) {
+            let bytes = read_regular(&truth_file, MAX_PROJECT_JSON_BYTES)?;
+            let q: Quantities = serde_json::from_slice(&bytes)
                 .with_context(|| format!("{}: not a quantities file", truth_file.display()))?;
             truth.insert(
                 s.survey.clone(),
@@ -106,7 +112,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let view = &dataset.views[k * dataset.views.len() / count];
             let camera = &view.camera;
             let d = args.downscale.max(1);
-            let camera = camera.resized(camera.intrinsics.width / d, camera.intrinsics.height / d);
+            // A photo smaller than the downscale still renders one pixel.
+            let camera = camera.resized(
+                (camera.intrinsics.width / d).max(1),
+                (camera.intrinsics.height / d).max(1),
+            );
             let png =
                 png_bytes(&render_view(&splats, &camera, &style)).context("encoding a render")?;
             figures.push(Figure::png(

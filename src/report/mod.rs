@@ -1,6 +1,7 @@
 //! Reports: charts and tables of measured results, as files. Presentation only: every figure
 //! arrives computed; nothing here renders a model or trains.
 
+pub mod chart_range;
 pub mod inspection;
 pub mod project_runs;
 pub mod tradeoff_chart;

@@ -10,6 +10,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::report::ChartError;
+use crate::report::chart_range::{padded_range, plottable};
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
@@ -24,16 +25,7 @@ fn class_colour(class: &str) -> RGBColor {
 }
 
 fn span(values: impl Iterator<Item = f64>, pad_fraction: f64) -> (f64, f64) {
-    let (lo, hi) = values
-        .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-            (lo.min(v), hi.max(v))
-        });
-    if !(lo <= hi) {
-        return (0.0, 1.0);
-    }
-    let pad = ((hi - lo) * pad_fraction).max(1e-3);
-    (lo - pad, hi + pad)
+    padded_range(values, |lo, hi| ((hi - lo) * pad_fraction).max(1e-3)).unwrap_or((0.0, 1.0))
 }
 
 /// One mark: what ran, its wall time, and what it reached (IoU per class where measured; PSNR
@@ -51,6 +43,20 @@ where
     DB::ErrorType: 'static,
 {
     root.fill(&WHITE)?;
+    // Marks a chart cannot place (a corrupted file's 1e308 seconds) are left out.
+    let rows: Vec<TradeoffPoint> = rows
+        .iter()
+        .filter(|r| plottable(r.seconds))
+        .map(|r| TradeoffPoint {
+            iou: r
+                .iou
+                .iter()
+                .filter(|&(_, &v)| plottable(v))
+                .map(|(k, &v)| (k.clone(), v))
+                .collect(),
+            ..r.clone()
+        })
+        .collect();
     let (left, right) = root.split_horizontally(root.dim_in_pixel().0 / 2);
     let (x0, x1) = span(rows.iter().map(|r| r.seconds), 0.1);
     let x = (x0.min(0.0), x1);
@@ -63,12 +69,17 @@ where
 
     // IoU per class against seconds.
     let (y0, y1) = span(rows.iter().flat_map(|r| r.iou.values().copied()), 0.15);
+    // IoU lies in [0, 1]; values a file holds outside it would leave an empty axis.
+    let (y0, y1) = match (y0.max(0.0), y1.min(1.0)) {
+        (y0, y1) if y0 < y1 => (y0, y1),
+        _ => (0.0, 1.0),
+    };
     let mut chart = ChartBuilder::on(&left)
         .caption("held-out IoU against wall time", ("sans-serif", 18))
         .margin(10)
         .x_label_area_size(36)
         .y_label_area_size(48)
-        .build_cartesian_2d(x.0..x.1, y0.max(0.0)..y1.min(1.0))?;
+        .build_cartesian_2d(x.0..x.1, y0..y1)?;
     chart
         .configure_mesh()
         .x_desc("seconds")
@@ -117,7 +128,7 @@ where
         .y_desc("PSNR (dB)")
         .draw()?;
     let blue = RGBColor(40, 90, 200);
-    for row in rows.iter().filter(|r| r.psnr.is_finite()) {
+    for row in rows.iter().filter(|r| plottable(r.psnr)) {
         let p = (row.seconds, row.psnr);
         chart.draw_series(std::iter::once(Circle::new(p, 5, blue.filled())))?;
         chart.draw_series(std::iter::once(Text::new(

@@ -8,24 +8,18 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::report::ChartError;
+use crate::report::chart_range::{padded_range, plottable_point};
 use crate::train::history::History;
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
 fn range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
-    let (lo, hi) = values
-        .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-            (lo.min(v), hi.max(v))
-        });
-    if !(lo <= hi) {
-        return None;
-    }
     // A flat series (the Gaussian count of an update) gets a band of 1 % around it.
-    let pad = ((hi - lo) * 0.05)
-        .max(hi.abs().max(lo.abs()) * 0.01)
-        .max(1e-9);
-    Some((lo - pad, hi + pad))
+    padded_range(values, |lo, hi| {
+        ((hi - lo) * 0.05)
+            .max(hi.abs().max(lo.abs()) * 0.01)
+            .max(1e-9)
+    })
 }
 
 fn panel<DB: DrawingBackend>(
@@ -39,6 +33,7 @@ fn panel<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
+    let points: Vec<(f64, f64)> = points.iter().copied().filter(plottable_point).collect();
     let x = range(points.iter().map(|p| p.0)).unwrap_or((0.0, 1.0));
     let y = range(points.iter().map(|p| p.1)).unwrap_or((0.0, 1.0));
     let mut chart = ChartBuilder::on(area)

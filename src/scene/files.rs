@@ -54,10 +54,29 @@ fn open_for_reading(path: &Path) -> std::io::Result<File> {
     options.open(path)
 }
 
+/// Whether anything is at `path`: a file, a folder, a pipe, or a link (even one to nothing).
+/// An optional input that is "there" must then be read with `open_regular`, so that a folder,
+/// a FIFO or a dangling link put in its place is refused naming it instead of being taken for
+/// absent (which `Path::is_file` would do).
+pub fn is_present(path: &Path) -> bool {
+    std::fs::symlink_metadata(path).is_ok()
+}
+
+/// The error of a `metadata` that failed: a link to nothing says so (the plain "No such file"
+/// would contradict the listing that shows the link).
+fn unreadable(path: &Path, e: std::io::Error) -> SceneError {
+    let dangling = e.kind() == std::io::ErrorKind::NotFound
+        && std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
+    if dangling {
+        return SceneError::invalid(path, "is a symbolic link to a file that does not exist");
+    }
+    SceneError::io(path, e)
+}
+
 /// Opens `path` for reading if it is a regular file (links followed); anything else is refused
 /// before `open`, and checked again on the opened handle in case the path changed in between.
 pub fn open_regular(path: &Path) -> Result<File, SceneError> {
-    let meta = std::fs::metadata(path).map_err(|e| SceneError::io(path, e))?;
+    let meta = std::fs::metadata(path).map_err(|e| unreadable(path, e))?;
     if !meta.is_file() {
         return Err(not_regular(path, &meta));
     }
@@ -86,6 +105,16 @@ pub fn read_regular(path: &Path, max_bytes: u64) -> Result<Vec<u8>, SceneError> 
         .read_to_end(&mut bytes)
         .map_err(|e| SceneError::io(path, e))?;
     Ok(bytes)
+}
+
+/// The whole content of a regular UTF-8 text file of at most `max_bytes` (`read_regular`).
+pub fn read_text(path: &Path, max_bytes: u64) -> Result<String, SceneError> {
+    String::from_utf8(read_regular(path, max_bytes)?).map_err(|e| {
+        SceneError::invalid(
+            path,
+            format!("not UTF-8 text (byte {})", e.utf8_error().valid_up_to()),
+        )
+    })
 }
 
 /// Image width and height from the file's header (the pixels are not decoded).
@@ -242,6 +271,15 @@ mod tests {
         );
         let err = read_regular(dir.path(), 1 << 20).unwrap_err().to_string();
         assert!(err.contains("a folder"), "{err}");
+        let link = dir.path().join("metrics.json");
+        std::os::unix::fs::symlink(dir.path().join("gone.json"), &link).unwrap();
+        assert!(is_present(&link) && !link.is_file());
+        let err = open_regular(&link).unwrap_err().to_string();
+        assert!(
+            err.contains("metrics.json") && err.contains("link to a file that does not exist"),
+            "{err}"
+        );
+        assert!(!is_present(&dir.path().join("gone.json")));
     }
 
     #[test]

@@ -44,6 +44,11 @@ pub const MAX_PROJECT_BYTES: u64 = 16 << 20;
 /// annotations while a file claiming more is refused before it is read.
 pub const MAX_ANNOTATION_BYTES: u64 = 1 << 30;
 
+/// Largest JSON file of a project read (a survey's `metrics.json` and `history.json`, a
+/// dataset's `truth/quantities.json`, a study's results): a training history keeps a sample per
+/// logged step, a few MB for the longest runs.
+pub const MAX_PROJECT_JSON_BYTES: u64 = 64 << 20;
+
 /// Checks a camera or image size against `MAX_IMAGE_SIDE` and `MAX_IMAGE_PIXELS` (both sides at
 /// least 1); the error says what is wrong, the caller adds the file.
 pub fn check_image_size(width: u64, height: u64) -> Result<(), String> {

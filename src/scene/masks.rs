@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use crate::scene::DamageClass;
-use crate::scene::files::{EntryBudget, list_dir};
+use crate::scene::files::{EntryBudget, is_present, list_dir};
 use crate::scene::limits::MAX_LISTED_ENTRIES;
 use crate::scene::load::decode;
 use crate::scene::{Mask, SceneError};
@@ -193,7 +193,8 @@ pub fn ignore_mask_path(masks_dir: &Path, stem: &str, image_path: &Path) -> Opti
     let file = image_path.file_name()?.to_str()?;
     let folder = Path::new(stem).parent().unwrap_or(Path::new(""));
     let path = masks_dir.join(folder).join(format!("{file}.png"));
-    path.is_file().then_some(path)
+    // Anything there is the mask: a folder or a pipe in its place is refused when it is read.
+    is_present(&path).then_some(path)
 }
 
 /// An image's ignore mask at `path` (1 = use the pixel, 0 = ignore it: a pedestrian, a car, the
@@ -253,14 +254,16 @@ pub fn read_view_masks(
     let mut masks = BTreeMap::new();
     for class in DamageClass::ALL {
         let path = masks_dir.join(class.id()).join(&file);
-        if path.is_file() {
+        // Anything there is the mask (`read_binary_mask` refuses a folder, a FIFO or a dangling
+        // link naming it); only nothing at all means the view has no mask of this class.
+        if is_present(&path) {
             let mask = read_binary_mask(&path)?;
             check(&path, &mask)?;
             masks.insert(class, mask);
         }
     }
     let coded = masks_dir.join(&file);
-    if coded.is_file() && ignore_mask != Some(coded.as_path()) {
+    if is_present(&coded) && ignore_mask != Some(coded.as_path()) {
         for (class, mask) in read_colour_mask(&coded, &default_palette())? {
             check(&coded, &mask)?;
             match masks.get_mut(&class) {

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::scene::atomic::{PendingFile, write_pending};
-use crate::scene::files::read_regular;
+use crate::scene::files::read_text;
 use crate::scene::limits::{MAX_IMAGE_SIDE, MAX_PROJECT_BYTES};
 use crate::scene::survey_name::{BadSurveyName, check_survey_name, same_survey_name};
 use crate::scene::{DamageClass, NEW_DAMAGE_COLOUR};
@@ -81,6 +81,36 @@ impl Survey {
         .into_iter()
         .filter_map(|(field, path)| path.as_deref().map(|p| (field, p)))
     }
+
+    /// Checks that the alignment and appearance hold finite numbers (a NaN rotation or colour
+    /// gain would spread through every render and measurement of the survey); the error starts
+    /// with the field.
+    fn check_numbers(&self) -> Result<(), String> {
+        let finite = |values: &[f64]| values.iter().all(|v| v.is_finite());
+        if let Some(a) = &self.alignment {
+            // The residual only reports the fit; the transform itself must be usable.
+            let numbers = [&a.rotation[..], &a.translation[..], &[a.scale]].concat();
+            if !finite(&numbers) || !(a.scale > 0.0) {
+                return Err(
+                    "alignment holds a number that is not finite (or a scale that is not positive)"
+                        .to_string(),
+                );
+            }
+        }
+        if let Some(t) = &self.appearance {
+            let numbers: Vec<f64> = t
+                .matrix
+                .iter()
+                .flatten()
+                .chain(&t.offset)
+                .map(|&v| f64::from(v))
+                .collect();
+            if !finite(&numbers) {
+                return Err("appearance holds a number that is not finite".to_string());
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Whether `path`, relative to the project folder, stays below it: not empty, not absolute, no
@@ -147,6 +177,18 @@ impl ColourTransform {
             rgb.copy_from_slice(&v.clamp(glam::Vec3::ZERO, glam::Vec3::ONE).to_array());
         }
     }
+}
+
+/// Checks a scale in metres per model unit: a positive finite number (0 would measure every
+/// region as nothing, a negative or NaN one breaks the plane fit). The error names no field;
+/// the caller says where the value came from.
+pub fn check_metres_per_unit(metres_per_unit: f64) -> Result<(), String> {
+    if metres_per_unit.is_finite() && metres_per_unit > 0.0 {
+        return Ok(());
+    }
+    Err(format!(
+        "{metres_per_unit} is not a scale: metres per model unit must be a positive finite number"
+    ))
 }
 
 /// Project-wide settings. Every field has a default, so files written before a field existed
@@ -335,6 +377,14 @@ impl Project {
                 "settings.background {bg:?} is not a colour in [0, 1]"
             ));
         }
+        if let Some(k) = self.settings.metres_per_unit {
+            check_metres_per_unit(k).map_err(|m| format!("settings.metres_per_unit {m}"))?;
+        }
+        for (index, survey) in self.surveys.iter().enumerate() {
+            survey
+                .check_numbers()
+                .map_err(|m| format!("surveys[{index}].{m}"))?;
+        }
         if !self.settings.scale.is_valid() {
             return Err(format!(
                 "settings.scale {:?} is not a factor 1, 2, 4 or 8 or a width 1 to {MAX_IMAGE_SIDE}",
@@ -347,13 +397,7 @@ impl Project {
     /// Reads `twin.ron`. A newer format version than `PROJECT_FORMAT_VERSION` is refused
     /// before anything else is interpreted.
     pub fn load(path: &Path) -> Result<Project, SceneError> {
-        let bytes = read_regular(path, MAX_PROJECT_BYTES)?;
-        let text = String::from_utf8(bytes).map_err(|e| {
-            SceneError::invalid(
-                path,
-                format!("not UTF-8 text (byte {})", e.utf8_error().valid_up_to()),
-            )
-        })?;
+        let text = read_text(path, MAX_PROJECT_BYTES)?;
         let probe: VersionProbe = ron::from_str(&text)
             .map_err(|e| SceneError::invalid(path, format!("not a twin project file: {e}")))?;
         if probe.format_version > PROJECT_FORMAT_VERSION {

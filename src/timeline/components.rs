@@ -70,7 +70,9 @@ pub fn components_at(
 }
 
 fn component_names(manifest: &Path) -> Option<BTreeMap<u8, String>> {
-    let text = std::fs::read_to_string(manifest).ok()?;
+    let text =
+        crate::scene::files::read_text(manifest, crate::scene::limits::MAX_PROJECT_JSON_BYTES)
+            .ok()?;
     let parsed: ComponentManifest = ron::from_str(&text).ok()?;
     (!parsed.components.is_empty()).then(|| parsed.components.into_iter().collect())
 }

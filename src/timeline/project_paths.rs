@@ -6,6 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::scene::atomic::write_atomic;
+use crate::scene::files::open_regular;
 use crate::scene::project::stays_inside;
 use crate::timeline::detect_survey::CHANGES_DIR;
 use crate::timeline::twin::{HISTORY_FILE, METRICS_FILE, TimelineError, Twin, io_error as io};
@@ -102,10 +103,12 @@ impl Twin {
 /// The folder holding one folder per survey.
 pub const SURVEYS_DIR: &str = "surveys";
 
-/// Copies a file atomically (the copy is a new file, never a write through a link).
+/// Copies a file atomically (the copy is a new file, never a write through a link). The source
+/// is opened like any project file (`open_regular`): a FIFO or a device named in `twin.ron` is
+/// refused naming it, not read for ever.
 fn copy_file(from: &Path, to: &Path) -> Result<(), TimelineError> {
-    let bytes = std::fs::read(from).map_err(|e| io(from, e))?;
-    write_atomic(to, |w| std::io::Write::write_all(w, &bytes))?;
+    let mut source = open_regular(from)?;
+    write_atomic(to, |w| std::io::copy(&mut source, w).map(drop))?;
     Ok(())
 }
 

@@ -135,7 +135,8 @@ impl TimelineView {
         let survey = self.twin.project.surveys.get(self.current)?;
         let folder = self.twin.inside(survey.changes.as_ref()?).ok()?;
         let path = change_map_path(&folder, view_name);
-        path.is_file().then_some(path)
+        // Anything there is the map: a folder or a pipe in its place is refused by the loader.
+        crate::scene::files::is_present(&path).then_some(path)
     }
 }
 

@@ -33,7 +33,7 @@ pub struct BudgetArgs {
     #[command(flatten)]
     pub run: RunArgs,
     /// Training threads (default: all cores, or RAYON_NUM_THREADS).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::args::parse_threads)]
     pub threads: Option<usize>,
     /// `train --budget` runs, as fractions of the full run's final count.
     #[arg(long, value_delimiter = ',', default_value = "0.5,0.3")]
@@ -84,10 +84,15 @@ pub fn run(args: BudgetArgs) -> anyhow::Result<()> {
 
     // Merge with the other scenes' rows already in the file.
     let json_path = args.out.join("budget-study.json");
-    let mut file: BudgetFile = match std::fs::read_to_string(&json_path) {
-        Ok(text) => serde_json::from_str(&text)
-            .with_context(|| format!("reading {}", json_path.display()))?,
-        Err(_) => BudgetFile::default(),
+    let mut file: BudgetFile = if damage_twin::scene::files::is_present(&json_path) {
+        let bytes = damage_twin::scene::files::read_regular(
+            &json_path,
+            damage_twin::scene::limits::MAX_PROJECT_JSON_BYTES,
+        )?;
+        serde_json::from_slice(&bytes)
+            .with_context(|| format!("reading {}", json_path.display()))?
+    } else {
+        BudgetFile::default()
     };
     let (width, height) = outcome.size;
     let scene = SceneRun {

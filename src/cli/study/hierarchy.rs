@@ -55,7 +55,7 @@ pub struct HierarchyArgs {
     pub mode: damage_twin::damage::TrainMode,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::args::parse_threads)]
     pub threads: Option<usize>,
 }
 

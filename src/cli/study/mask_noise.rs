@@ -71,7 +71,7 @@ pub struct MaskNoiseArgs {
     pub colours: Vec<String>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::args::parse_threads)]
     pub threads: Option<usize>,
     /// Train nothing: redraw the chart and tables from an existing `--out DIR/study.json`.
     #[arg(long)]

@@ -44,9 +44,12 @@ pub(crate) fn read_saved<T: serde::de::DeserializeOwned>(
 ) -> anyhow::Result<T> {
     use anyhow::Context;
     let path = dir.join(name);
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("{} is not a {name}", path.display()))
+    // Read like any input: a FIFO or a device put in its place is refused, not waited on.
+    let bytes = damage_twin::scene::files::read_regular(
+        &path,
+        damage_twin::scene::limits::MAX_PROJECT_JSON_BYTES,
+    )?;
+    serde_json::from_slice(&bytes).with_context(|| format!("{} is not a {name}", path.display()))
 }
 
 /// Writes `text` to `dir/name` atomically.

@@ -30,7 +30,7 @@ pub struct StabilityArgs {
     pub scale: ImageScale,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::args::parse_threads)]
     pub threads: Option<usize>,
     /// Training-view counts (the baseline trains on all of them).
     #[arg(long, value_delimiter = ',', default_value = "30,15,8")]

@@ -6,6 +6,8 @@ use std::path::PathBuf;
 use anyhow::bail;
 use glam::DVec3;
 
+use damage_twin::scene::project::check_metres_per_unit;
+
 use crate::cli::args::LockArgs;
 
 #[derive(clap::Args, Debug)]
@@ -50,9 +52,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         _ => bail!("give --from, --to and --metres, or --metres-per-unit"),
     };
-    if !(scale.is_finite() && scale > 0.0) {
-        bail!("the scale must be a positive number of metres per unit, not {scale}");
-    }
+    // The check `twin.ron`'s `settings.metres_per_unit` is held to when it loads.
+    let given = if args.metres_per_unit.is_some() {
+        "--metres-per-unit"
+    } else {
+        "--metres over the --from/--to distance"
+    };
+    check_metres_per_unit(scale).map_err(|why| anyhow::anyhow!("{given}: {why}"))?;
     let mut twin = super::open_to_write(&args.dir, &args.lock, "twin set-scale")?;
     twin.commit(|twin| {
         twin.project.settings.metres_per_unit = Some(scale);

@@ -11,6 +11,10 @@ use kiddo::{KdTree, SquaredEuclidean};
 use crate::splats::Splats;
 use crate::splats::model::sigmoid;
 
+/// Most samples along one ray: 4096 at the metric step of 5 cm is a 200 m ray, longer than any
+/// photo's distance to the structure it shows.
+pub const MAX_RAY_SAMPLES: usize = 4096;
+
 pub struct Occlusion<'a> {
     splats: &'a Splats,
     tree: KdTree<f64, 3>,
@@ -35,6 +39,11 @@ impl<'a> Occlusion<'a> {
         }
         let direction = (to - from).normalize();
         let mut near = BTreeSet::new();
+        // A scale typed in the wrong unit (1000 metres per unit for 1 mm) made the step a
+        // millionth of the ray and one test took minutes: past `MAX_RAY_SAMPLES` the step and
+        // the reach grow together, so the samples still cover the ray (reach ≥ step / 2 as set).
+        let coarser = (length / step / MAX_RAY_SAMPLES as f64).max(1.0);
+        let (step, reach) = (step * coarser, reach * coarser);
         let samples = (length / step).ceil() as usize;
         for k in 0..=samples {
             let p = from + direction * (k as f64 * step).min(length);

@@ -6,6 +6,8 @@ use std::path::Path;
 use serde::Deserialize;
 
 use crate::damage::TrainMode;
+use crate::scene::files::{is_present, read_regular};
+use crate::scene::limits::MAX_PROJECT_JSON_BYTES;
 use crate::studies::stability::row::StabilityRow;
 
 /// The mask-noise study's rows this study reads.
@@ -33,15 +35,17 @@ pub fn mask_noise_rows(
     rows: &mut Vec<StabilityRow>,
     log: &mut dyn FnMut(String),
 ) -> Result<Option<String>, String> {
-    let Ok(text) = std::fs::read_to_string(path) else {
+    if !is_present(path) {
         log(format!(
             "no {}: the mask_noise axis is left out",
             path.display()
         ));
         return Ok(None);
-    };
+    }
+    // Anything there is read like any input: a FIFO or a folder in its place is an error.
+    let bytes = read_regular(path, MAX_PROJECT_JSON_BYTES).map_err(|e| e.to_string())?;
     let file: MaskNoiseFile =
-        serde_json::from_str(&text).map_err(|e| format!("reading {}: {e}", path.display()))?;
+        serde_json::from_slice(&bytes).map_err(|e| format!("reading {}: {e}", path.display()))?;
     let mut rates: Vec<f64> = file
         .rows
         .iter()

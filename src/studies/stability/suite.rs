@@ -10,6 +10,8 @@ use serde::Deserialize;
 
 use crate::damage::TrainMode;
 use crate::damage::setup::RunConfig;
+use crate::scene::files::read_text;
+use crate::scene::limits::MAX_PROJECT_JSON_BYTES;
 use crate::scene::open::OpenOptions;
 use crate::scene::{Dataset, ImageScale};
 use crate::studies::stability::mask_noise_axis::mask_noise_rows;
@@ -197,7 +199,7 @@ fn measure_one(
 /// The synthetic survey parameters in the dataset's `truth/manifest.ron`.
 fn synth_params(dataset: &Path) -> Result<SynthParams, String> {
     let manifest_path = dataset.join("truth").join("manifest.ron");
-    let text = std::fs::read_to_string(&manifest_path).map_err(|e| {
+    let text = read_text(&manifest_path, MAX_PROJECT_JSON_BYTES).map_err(|e| {
         format!(
             "reading {} (the textureless axis regenerates a synthetic survey; \
              --no-textureless skips it): {e}",

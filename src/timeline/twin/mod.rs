@@ -11,6 +11,8 @@ use serde::de::DeserializeOwned;
 
 use crate::scene::SceneError;
 use crate::scene::atomic::write_atomic;
+use crate::scene::files::{is_present, read_regular};
+use crate::scene::limits::MAX_PROJECT_JSON_BYTES;
 use crate::scene::project::{PROJECT_FILE, Project, Survey, SurveyError};
 use crate::scene::survey_name::{same_survey_name, survey_name_from};
 use crate::splats::Splats;
@@ -368,7 +370,8 @@ impl Twin {
     /// The training history of survey `name`'s model, where one was kept.
     pub fn load_history(&self, name: &str) -> Result<Option<History>, TimelineError> {
         let path = self.survey_file(name, HISTORY_FILE)?;
-        if !path.is_file() {
+        // Only nothing there is "no history": a folder or a pipe in its place is refused.
+        if !is_present(&path) {
             return Ok(None);
         }
         read_json(&path).map(Some)
@@ -462,10 +465,12 @@ impl Twin {
     }
 }
 
-/// A JSON file of the project, read whole; a file that does not parse names itself.
+/// A JSON file of the project, read whole like any hostile input (`scene::files::read_regular`:
+/// a FIFO, a device or a folder is refused at once, a file over `MAX_PROJECT_JSON_BYTES` before
+/// it is read); a file that does not parse names itself.
 fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T, TimelineError> {
-    let text = std::fs::read_to_string(path).map_err(|e| io_error(path, e))?;
-    serde_json::from_str(&text).map_err(|e| TimelineError::Io {
+    let bytes = read_regular(path, MAX_PROJECT_JSON_BYTES)?;
+    serde_json::from_slice(&bytes).map_err(|e| TimelineError::Io {
         path: path.to_path_buf(),
         message: format!("not valid JSON here: {e}"),
     })
