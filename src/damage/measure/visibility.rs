@@ -15,6 +15,14 @@ use crate::splats::model::sigmoid;
 /// photo's distance to the structure it shows.
 pub const MAX_RAY_SAMPLES: usize = 4096;
 
+/// How a ray of `length` is sampled: the sample count, the step and the reach, the step and the
+/// reach grown together when `step` would take more than `MAX_RAY_SAMPLES` samples.
+fn ray_sampling(length: f64, step: f64, reach: f64) -> (usize, f64, f64) {
+    let coarser = (length / step / MAX_RAY_SAMPLES as f64).max(1.0);
+    let (step, reach) = (step * coarser, reach * coarser);
+    ((length / step).ceil() as usize, step, reach)
+}
+
 pub struct Occlusion<'a> {
     splats: &'a Splats,
     tree: KdTree<f64, 3>,
@@ -42,9 +50,7 @@ impl<'a> Occlusion<'a> {
         // A scale typed in the wrong unit (1000 metres per unit for 1 mm) made the step a
         // millionth of the ray and one test took minutes: past `MAX_RAY_SAMPLES` the step and
         // the reach grow together, so the samples still cover the ray (reach ≥ step / 2 as set).
-        let coarser = (length / step / MAX_RAY_SAMPLES as f64).max(1.0);
-        let (step, reach) = (step * coarser, reach * coarser);
-        let samples = (length / step).ceil() as usize;
+        let (samples, step, reach) = ray_sampling(length, step, reach);
         for k in 0..=samples {
             let p = from + direction * (k as f64 * step).min(length);
             for hit in self
@@ -81,5 +87,24 @@ impl<'a> Occlusion<'a> {
         let offset = to_mean - d * t;
         let power = -0.5 * (offset * offset * inverse_variance).element_sum();
         (f64::from(sigmoid(s.raw_opacities[g])) * power.exp()).min(0.99)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_ray_takes_at_most_max_ray_samples_and_its_reach_grows_with_its_step() {
+        // 5 cm steps on a 10 m ray: as asked.
+        assert_eq!(ray_sampling(10.0, 0.05, 0.03), (200, 0.05, 0.03));
+        // A metric step turned into 50 µm units by a scale typed in millimetres (1000 m per
+        // unit): 10 m of ray would be 200 000 samples.
+        let (samples, step, reach) = ray_sampling(10.0, 0.05e-3, 0.03e-3);
+        assert!(samples <= MAX_RAY_SAMPLES + 1, "{samples} samples");
+        assert!(
+            (reach / step - 0.6).abs() < 1e-9,
+            "step {step}, reach {reach}"
+        );
     }
 }
