@@ -4,9 +4,10 @@
 //! bit flips, byte inserts and deletes, truncation, header lies (PLY counts and formats, PNG and
 //! JPEG sizes, COLMAP counts, SPZ headers: an SPZ payload is re-gzipped so they reach the
 //! decoder), NaN/Inf and huge numbers, wrong JSON/RON types, repeated lines — and read back
-//! through the public API (twin projects: opened and reported, `fuzz_support/project_targets.rs`). Every case must end in `Ok` or a typed `SceneError` whose message is
-//! one line naming a file of the case, never a panic (caught, with its location) and never more
-//! than `CASE_LIMIT`.
+//! through the public API (twin projects: opened and reported,
+//! `fuzz_support/project_targets.rs`). Every case must end in `Ok` or a typed error (a
+//! `SceneError`; a project's errors as messages) that is one line naming a file of the case,
+//! never a panic (caught, with its location) and never more than `CASE_LIMIT`.
 //!
 //! `cargo test --test fuzz_readers` runs a bounded number of cases (measured in docs/ROBUSTNESS.md).
 //! The long run:
