@@ -4,9 +4,10 @@
 //! bit flips, byte inserts and deletes, truncation, header lies (PLY counts and formats, PNG and
 //! JPEG sizes, COLMAP counts, SPZ headers: an SPZ payload is re-gzipped so they reach the
 //! decoder), NaN/Inf and huge numbers, wrong JSON/RON types, repeated lines — and read back
-//! through the public API. Every case must end in `Ok` or a typed `SceneError` whose message is
-//! one line naming a file of the case, never a panic (caught, with its location) and never more
-//! than `CASE_LIMIT`.
+//! through the public API (twin projects: opened and reported,
+//! `fuzz_support/project_targets.rs`). Every case must end in `Ok` or a typed error (a
+//! `SceneError`; a project's errors as messages) that is one line naming a file of the case,
+//! never a panic (caught, with its location) and never more than `CASE_LIMIT`.
 //!
 //! `cargo test --test fuzz_readers` runs a bounded number of cases (measured in docs/ROBUSTNESS.md).
 //! The long run:
@@ -30,13 +31,14 @@ use std::sync::{Mutex, Once};
 use std::time::{Duration, Instant};
 
 use fuzz_support::mutate::{Content, image_size_lie, mutate};
+use fuzz_support::project_targets::{project_file_target, survey_files_target};
 use fuzz_support::targets::{
     Target, colmap_target, images_target, masks_target, ply_points_target, ply_splats_target,
     project_target, spz_target, transforms_target,
 };
 
-/// Total cases of a plain `cargo test`, spread over the 9 targets: 10 000 took 18.7 to 27.4 s in
-/// the dev profile on the project's two-core machine shared with other builds
+/// Total cases of a plain `cargo test`, spread over the 11 targets: 10 000 took 15.7 to 27.4 s
+/// in the dev profile on the project's two-core machine shared with other builds
 /// (docs/ROBUSTNESS.md), under the 60 s budget.
 const DEFAULT_CASES: usize = 10_000;
 
@@ -74,7 +76,7 @@ fn config() -> Config {
 }
 
 /// The number of `fuzz_target!` tests below (the total case count is split over them).
-const TARGETS: usize = 9;
+const TARGETS: usize = 11;
 
 // ---------------------------------------------------------------------------------------------
 // The runner
@@ -140,8 +142,8 @@ fn watchdog(
 }
 
 /// Runs the target's cases; `None` is a target whose seeds need missing shared data (skipped).
-fn run(
-    target: impl Into<Option<Target>>,
+fn run<E: std::fmt::Display>(
+    target: impl Into<Option<Target<E>>>,
     started: &'static AtomicU64,
     current: &'static Mutex<String>,
 ) {
@@ -276,6 +278,8 @@ fuzz_target!(ply_splats_never_panic, ply_splats_target());
 fuzz_target!(ply_point_clouds_never_panic, ply_points_target());
 fuzz_target!(spz_never_panics, spz_target());
 fuzz_target!(twin_ron_never_panics, project_target());
+fuzz_target!(projects_never_panic_or_hang, project_file_target());
+fuzz_target!(survey_files_never_panic_or_hang, survey_files_target());
 
 /// The mutations themselves: each kind changes its input, and a case is reproducible from its
 /// seed (what `DAMAGE_TWIN_FUZZ_ONLY` relies on).

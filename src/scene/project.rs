@@ -361,6 +361,19 @@ impl Project {
                 SurveyError::BadName { .. } => format!("surveys[{index}].name: {e}"),
                 _ => e.to_string(),
             })?;
+            let named =
+                std::iter::once(("dataset", survey.dataset.as_path())).chain(survey.outputs());
+            for (field, path) in named {
+                // A line break or another control character in a path is a damaged file (the
+                // fuzz harness found such paths split every message naming them over lines).
+                if path.to_string_lossy().chars().any(char::is_control) {
+                    return Err(format!(
+                        "surveys[{index}].{field} {:?} holds a control character; no path of a \
+                         project does",
+                        path.to_string_lossy()
+                    ));
+                }
+            }
             for (field, path) in survey.outputs() {
                 if !stays_inside(path) {
                     return Err(format!(

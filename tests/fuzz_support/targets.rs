@@ -17,13 +17,15 @@ use glam::{Quat, Vec3};
 
 use super::mutate::Content;
 
-pub struct Target {
+/// `E`: what a failed read returns (the scene readers' `SceneError`; a project's reads return
+/// several error types, kept as their messages).
+pub struct Target<E = SceneError> {
     pub name: &'static str,
     pub dir: tempfile::TempDir,
     /// Files (relative to `dir`) a case mutates, one per case, with their valid bytes.
     pub seeds: Vec<(PathBuf, Vec<u8>, Content)>,
     /// Reads the case: the folder and the mutated file.
-    pub read: fn(&Path, &Path) -> Result<(), SceneError>,
+    pub read: fn(&Path, &Path) -> Result<(), E>,
 }
 
 pub fn seed(dir: &Path, rel: &str, content: Content) -> (PathBuf, Vec<u8>, Content) {
@@ -243,9 +245,9 @@ pub fn masks_target() -> Option<Target> {
     })
 }
 
-pub fn transforms_target() -> Target {
-    let dir = tempfile::tempdir().unwrap();
-    let root = dir.path();
+/// A `transforms.json` dataset in `root`: the three images, a point cloud, frames with
+/// distortion, per-frame intrinsics and a 3×4 matrix.
+pub fn write_transforms_dataset(root: &Path) {
     write_images(root);
     let cloud = PointCloud {
         positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(0.5, 0.5, 0.5)],
@@ -266,6 +268,12 @@ pub fn transforms_target() -> Target {
 }
 "#;
     std::fs::write(root.join("transforms.json"), json).unwrap();
+}
+
+pub fn transforms_target() -> Target {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    write_transforms_dataset(root);
     let seeds = vec![
         seed(root, "transforms.json", Content::Text),
         seed(root, "points.ply", Content::Binary),
