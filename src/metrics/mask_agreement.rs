@@ -48,7 +48,8 @@ impl MaskAgreement {
     }
 }
 
-fn ratio_or_one(numerator: u64, denominator: u64) -> f64 {
+/// A ratio of pixel counts, 1 when there is nothing to count (no error on an empty reference).
+pub(crate) fn ratio_or_one(numerator: u64, denominator: u64) -> f64 {
     if denominator == 0 {
         1.0
     } else {

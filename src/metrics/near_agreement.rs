@@ -5,6 +5,7 @@
 //! as `crack_unet_crackpot/SOURCE.md`'s "within 2 px" figures do: its 0.76 / 0.73 are per-image
 //! means of these with radius 2).
 
+use crate::metrics::mask_agreement::ratio_or_one;
 use serde::{Deserialize, Serialize};
 
 /// Counts of one or more mask pairs; add them with `add`.
@@ -74,14 +75,6 @@ impl NearAgreement {
     /// Reference pixels near a prediction over reference pixels (1 when there is no reference).
     pub fn recall(&self) -> f64 {
         ratio_or_one(self.reference_near_predicted, self.reference)
-    }
-}
-
-fn ratio_or_one(numerator: u64, denominator: u64) -> f64 {
-    if denominator == 0 {
-        1.0
-    } else {
-        numerator as f64 / denominator as f64
     }
 }
 
