@@ -107,4 +107,25 @@ mod tests {
             "step {step}, reach {reach}"
         );
     }
+
+    #[test]
+    fn the_coarser_samples_still_find_the_gaussian_in_the_way() {
+        let mut splats = Splats::empty(0, 0);
+        splats.push(
+            glam::Vec3::new(0.0, 0.0, 5.0),
+            glam::Vec3::ZERO,
+            glam::Quat::IDENTITY,
+            0.0,
+            &[0.5; 3],
+            &[],
+            0,
+            0,
+        );
+        let occlusion = Occlusion::new(&splats);
+        // Ten units at a step of 1e-9 units: ten billion samples without the bound.
+        let seen =
+            occlusion.transmittance(DVec3::ZERO, DVec3::new(0.0, 0.0, 10.0), 0.1, 1e-9, 2e-9);
+        // The coarser samples still find the Gaussian in the way (opacity 0.5 at its peak).
+        assert!((seen - 0.5).abs() < 1e-6, "{seen}");
+    }
 }
