@@ -251,6 +251,9 @@ impl eframe::App for TwinApp {
             // Progress arrives every step: a few repaints a second show it without taking the
             // training thread's core on a software renderer.
             ctx.request_repaint_after(std::time::Duration::from_millis(250));
+        } else if self.state.timeline.is_some() {
+            // An open project is watched for other writers (state::project_watch) once a second.
+            ctx.request_repaint_after(std::time::Duration::from_secs(1));
         }
         self.top_bar(ui);
 
@@ -317,6 +320,9 @@ impl eframe::App for TwinApp {
             // often as snapshots come: on a software driver every UI frame costs CPU time that
             // training needs.
             ctx.request_repaint_after(std::time::Duration::from_millis(250));
+        } else if self.state.timeline.is_some() {
+            // An open project is watched for other writers (state::project_watch) once a second.
+            ctx.request_repaint_after(std::time::Duration::from_secs(1));
         }
     }
 

@@ -24,11 +24,13 @@ use crate::train::history::History;
 
 mod editing;
 mod picking;
+mod project_watch;
 mod refining;
 mod saving;
 mod timeline;
 mod view;
 
+pub use project_watch::ProjectWatch;
 pub use refining::RefineSession;
 pub use timeline::{LoadedSurvey, TimelineJob, TimelineView, TimelineWork, survey_dataset};
 pub use view::view_camera;
@@ -225,6 +227,7 @@ impl AppState {
         }
         changed |= self.poll_refine();
         changed |= self.poll_timeline();
+        changed |= self.poll_project_watch();
         if let Some(session) = &mut self.training {
             let update = session.poll(&mut self.history);
             if update.changed {

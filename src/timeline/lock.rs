@@ -189,19 +189,57 @@ fn read_holder(file: &mut File) -> String {
     let read = file
         .seek(SeekFrom::Start(0))
         .and_then(|_| file.take(MAX_HOLDER_BYTES).read_to_string(&mut text));
+    match (read, parse_holder(&text)) {
+        (Ok(_), Some(holder)) => holder.to_string(),
+        _ => "another process".into(),
+    }
+}
+
+/// A lock holder as its file names it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Holder {
+    pub command: String,
+    pub pid: u32,
+    /// Unix seconds when it took the lock.
+    pub since: Option<u64>,
+}
+
+impl std::fmt::Display for Holder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "`{}` (pid {})", self.command, self.pid)?;
+        match self.since {
+            Some(since) => write!(f, " since {}", utc_time(since)),
+            None => Ok(()),
+        }
+    }
+}
+
+/// The holder a lock file's text names, if it names one.
+fn parse_holder(text: &str) -> Option<Holder> {
     let field = |key: &str| {
         text.lines()
             .find_map(|l| l.strip_prefix(key)?.strip_prefix(": "))
             .map(str::trim)
     };
-    let (Ok(_), Some(command), Some(pid)) = (read, field("command"), field("pid")) else {
-        return "another process".into();
-    };
-    let since = field("since")
-        .and_then(|s| s.parse::<u64>().ok())
-        .map(|s| format!(" since {}", utc_time(s)))
-        .unwrap_or_default();
-    format!("`{command}` (pid {pid}){since}")
+    Some(Holder {
+        command: field("command")?.to_string(),
+        pid: field("pid")?.parse().ok()?,
+        since: field("since").and_then(|s| s.parse().ok()),
+    })
+}
+
+/// Who is writing the project in `dir` now, for a view that only reads it (the app): the holder
+/// the lock file names while that process is alive, without taking or probing the lock (a probe
+/// would hold it for an instant and could turn a writer away). A holder empties the file when it
+/// lets go, so a name left there is a killed holder's, and its process is gone. None for this
+/// process's own lock, for no lock file, and off Linux where liveness is not checked.
+pub fn current_holder(dir: &Path) -> Option<Holder> {
+    let path = dir.join(LOCK_FILE);
+    let text = crate::scene::files::read_text(&path, MAX_HOLDER_BYTES).ok()?;
+    let holder = parse_holder(&text)?;
+    let alive =
+        cfg!(target_os = "linux") && Path::new("/proc").join(holder.pid.to_string()).exists();
+    (alive && holder.pid != std::process::id()).then_some(holder)
 }
 
 /// A wait as the user reads it: `0.3 s`, `30 s`.
@@ -276,5 +314,31 @@ mod tests {
         let error = ProjectLock::acquire(&project, &Writer::default()).unwrap_err();
         assert!(matches!(error, LockError::Io { .. }), "{error}");
         assert_eq!(std::fs::read_to_string(&outside).unwrap(), "keep");
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_reader_sees_a_live_holder_not_its_own_lock_nor_a_killed_ones() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(current_holder(dir.path()), None, "no lock file");
+        let held = ProjectLock::acquire(dir.path(), &Writer::new("twin update")).unwrap();
+        assert_eq!(current_holder(dir.path()), None, "this process's own lock");
+        drop(held);
+        assert_eq!(
+            current_holder(dir.path()),
+            None,
+            "let go: the file is emptied"
+        );
+        let path = dir.path().join(LOCK_FILE);
+        // Process 1 is always alive: another writer holding the project since 00:00 UTC.
+        std::fs::write(&path, "command: twin detect\npid: 1\nsince: 0\n").unwrap();
+        let holder = current_holder(dir.path()).expect("a live holder");
+        assert_eq!(
+            holder.to_string(),
+            "`twin detect` (pid 1) since 1970-01-01 00:00 UTC"
+        );
+        // No process has this id (pid_max is at most 2^22): a killed holder's name.
+        std::fs::write(&path, "command: twin update\npid: 4294967294\n").unwrap();
+        assert_eq!(current_holder(dir.path()), None);
     }
 }

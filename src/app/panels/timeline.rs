@@ -33,6 +33,15 @@ impl TimelinePanel {
             ui.separator();
             compare_controls(ui, timeline, state, commands);
         });
+        if let Some(holder) = &timeline.watch.holder {
+            ui.colored_label(
+                ui.visuals().warn_fg_color,
+                format!(
+                    "the project is being updated by {holder}: the timeline is read again when \
+                     it finishes"
+                ),
+            );
+        }
         ui.horizontal_wrapped(|ui| match &timeline.job {
             Some(job) => job_progress(ui, job, commands),
             None => self.job_buttons(ui, timeline.current, commands),

@@ -11,6 +11,7 @@ use std::time::Duration;
 
 use crossbeam_channel::{Sender, TryRecvError};
 
+use super::ProjectWatch;
 use super::saving::viewer_writer;
 use super::{AppState, WorkerResult};
 use crate::damage::layer::{DamageLayer, survey_colours};
@@ -85,12 +86,15 @@ pub struct TimelineView {
     pub job: Option<TimelineJob>,
     /// Snapping to a view shows the survey's change map instead of its photo, where one exists.
     pub show_change_maps: bool,
+    /// Other processes writing the project, and its file's last change.
+    pub watch: ProjectWatch,
 }
 
 impl TimelineView {
     /// The timeline of `twin` showing survey `current` (already loaded).
     pub fn new(twin: Twin, current: usize, shown: LoadedSurvey) -> TimelineView {
         TimelineView {
+            watch: ProjectWatch::new(&twin),
             twin,
             current,
             compare: None,
