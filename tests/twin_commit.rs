@@ -3,34 +3,19 @@
 //! cleaned (after it) by the next command, temporary files of killed writers do not stay, and
 //! `twin detect` writes its change maps under the project's lock. Quick: no training.
 
+mod project_support;
+
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use damage_twin::scene::project::PROJECT_FILE;
-use damage_twin::splats::Splats;
 use damage_twin::timeline::Twin;
 use damage_twin::timeline::detect_survey::{DetectOptions, detect_survey};
 use damage_twin::timeline::lock::{ProjectLock, Writer};
+use project_support::{gaussians, one_gaussian};
 
 /// No process has this id on Linux (pid_max is at most 2^22): what a killed process left.
 const DEAD: u32 = u32::MAX - 1;
-
-fn gaussians(count: usize) -> Splats {
-    let mut splats = Splats::empty(0, 0);
-    for i in 0..count {
-        splats.push(
-            glam::Vec3::new(i as f32, 0.0, 0.0),
-            glam::Vec3::ZERO,
-            glam::Quat::IDENTITY,
-            0.0,
-            &[0.1, 0.2, 0.3],
-            &[],
-            0,
-            0,
-        );
-    }
-    splats
-}
 
 /// A project with surveys `a` and `b`, `b` with a model of one Gaussian, metrics and history.
 fn project(root: &Path) -> PathBuf {
@@ -41,8 +26,8 @@ fn project(root: &Path) -> PathBuf {
     twin.add_survey("b", "2025-01-01", &root.join("data/b"))
         .unwrap();
     twin.commit(|twin| {
-        twin.save_model("a", &gaussians(1))?;
-        twin.save_model("b", &gaussians(1))?;
+        twin.save_model("a", &one_gaussian())?;
+        twin.save_model("b", &one_gaussian())?;
         twin.save_metrics("b", &serde_json::json!({"run": "old"}))?;
         twin.save_history("b", &Default::default()).map(drop)
     })
