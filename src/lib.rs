@@ -6,6 +6,7 @@
 
 #[cfg(feature = "app")]
 pub mod app;
+pub mod blocks;
 pub mod damage;
 pub mod gpu;
 pub mod metrics;

@@ -17,6 +17,7 @@ const LAYERS: &[&[&str]] = &[
     &["train"],
     &["damage"],
     &["segment"],
+    &["blocks"],
     &["timeline"],
     &["report"],
     &["studies"],

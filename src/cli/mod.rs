@@ -4,6 +4,7 @@
 mod args;
 mod bench;
 mod bench_render;
+mod cluster;
 mod compact;
 mod demo;
 mod eval;
@@ -11,6 +12,8 @@ mod export;
 mod inspect;
 mod launch;
 mod masks;
+mod merge;
+mod partition;
 mod pose;
 mod refine;
 mod render;
@@ -19,6 +22,7 @@ mod segment;
 mod study;
 mod synth;
 mod train;
+mod train_block;
 mod twin;
 
 use std::process::ExitCode;
@@ -77,6 +81,17 @@ enum Command {
     /// The survey timeline of a twin project: new, add-survey, detect, update, status.
     #[command(subcommand)]
     Twin(twin::Twin),
+    /// Cut a posed dataset into blocks along its long axis: a plan folder (plan.json, block
+    /// manifests, blocks.png) for training block by block (docs/CLUSTER.md).
+    Partition(partition::Args),
+    /// Train one block of a plan (K from --block or the engine's environment) into the plan
+    /// folder; a finished block is a no-op.
+    TrainBlock(train_block::Args),
+    /// Run a plan's blocks through an engine: Slurm or Kubernetes job files, or local processes.
+    #[command(subcommand)]
+    Cluster(cluster::Cluster),
+    /// One model from a plan's trained blocks, with the seam report on held-out views.
+    Merge(merge::Args),
     /// The built-in demo building: the app, or with --headless synth + train + eval + charts.
     Demo(demo::Args),
     /// The app on a dataset, a twin project or a PLY model.
@@ -107,6 +122,10 @@ pub fn main() -> ExitCode {
         Some(Command::Segment(args)) => segment::run(args),
         Some(Command::Study(study)) => study::run(study),
         Some(Command::Twin(command)) => twin::run(command),
+        Some(Command::Partition(args)) => partition::run(args),
+        Some(Command::TrainBlock(args)) => train_block::run(args),
+        Some(Command::Cluster(command)) => cluster::run(command),
+        Some(Command::Merge(args)) => merge::run(args),
         Some(Command::Demo(args)) => demo::run(args),
         Some(Command::Open(args)) => launch::open_window(args),
     };

@@ -1,0 +1,227 @@
+//! One block, one job: block K of a plan trained through the focused-run seam (`train::focus`):
+//! only its photos, loaded in the model's light, only the Gaussians of its enlarged box (the
+//! dataset's initial model cut to the box, all of them trainable), and only its region of each
+//! photo (each view cropped to the hull of those Gaussians, which is also the loss region, so
+//! the rest of the structure seen behind the block neither trains it nor costs a step). The
+//! result goes into the plan folder as a run folder (`scene::run_folder`): a kill leaves no
+//! result or a whole one, and the next run cleans what the dead one left.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::blocks::plan::Plan;
+use crate::damage::Palette;
+use crate::damage::setup::{RunConfig, apply_mode, effective_mode, model_and_spec};
+use crate::scene::run_folder::RunFolder;
+use crate::scene::{Dataset, SceneError};
+use crate::splats::Splats;
+use crate::train::focus::hulls::HullConfig;
+use crate::train::focus::{Focus, ViewLights, crop_to_hulls};
+use crate::train::job::{JobContext, JobError};
+use crate::train::run::{TrainSetup, run_training};
+use crate::train::spec::TrainView;
+
+/// The files a block's result folder holds; none is carried over from an earlier run.
+pub const BLOCK_OUTPUTS: &[&str] = &["model.ply", "block.json"];
+/// Pixels of context kept around a block's hull in each crop.
+const CROP_MARGIN_PX: u32 = 16;
+
+/// The folder of block `k` in a plan folder (its manifest, and its `result/`).
+pub fn block_folder(plan_dir: &Path, k: usize) -> PathBuf {
+    plan_dir.join(format!("block-{k:03}"))
+}
+
+/// The run folder block `k`'s result is committed to.
+pub fn result_folder(plan_dir: &Path, k: usize) -> PathBuf {
+    block_folder(plan_dir, k).join("result")
+}
+
+/// What a block's run records beside its model (`block.json`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BlockRecord {
+    /// The digest of the plan it was trained for (`Plan::digest`).
+    pub plan_digest: String,
+    pub block: usize,
+    pub photos: usize,
+    pub steps: u32,
+    pub gaussians: usize,
+    pub seconds: f64,
+    /// The share of the photos' pixels inside the block's hull (what a step renders).
+    pub region_fraction: f64,
+    /// Peak resident memory of the process that trained it (None where not measured).
+    pub peak_rss_mb: Option<f64>,
+}
+
+/// The record of block `k`'s result when it is finished for this plan (its model beside it):
+/// rerunning it is then a no-op.
+pub fn finished(plan_dir: &Path, plan: &Plan, k: usize) -> Option<BlockRecord> {
+    let folder = result_folder(plan_dir, k);
+    let text = std::fs::read_to_string(folder.join("block.json")).ok()?;
+    let record: BlockRecord = serde_json::from_str(&text).ok()?;
+    (record.plan_digest == plan.digest() && record.block == k && folder.join("model.ply").is_file())
+        .then_some(record)
+}
+
+/// A trained block.
+pub struct BlockOutcome {
+    pub splats: Arc<Splats>,
+    pub record: BlockRecord,
+    pub cancelled: bool,
+}
+
+/// Trains block `k` of `plan` on `dataset` (the plan's dataset, opened).
+pub fn train_block(
+    ctx: &mut JobContext,
+    dataset: &Dataset,
+    plan: &Plan,
+    k: usize,
+) -> Result<BlockOutcome, JobError> {
+    let started = Instant::now();
+    let block = plan.blocks.get(k).ok_or_else(|| {
+        JobError::Invalid(format!(
+            "block {k} is out of range: the plan has blocks 0 to {}",
+            plan.blocks.len() - 1
+        ))
+    })?;
+    if let Some(why) = &block.skipped {
+        return Err(JobError::Invalid(format!("block {k} is skipped: {why}")));
+    }
+    let indices = block
+        .photos
+        .iter()
+        .map(|name| {
+            dataset.view_index(name).ok_or_else(|| {
+                JobError::Invalid(format!(
+                    "block {k}'s photo {name} is not in {}",
+                    dataset.root.display()
+                ))
+            })
+        })
+        .collect::<Result<Vec<usize>, JobError>>()?;
+    let training = &plan.training;
+    let scale = training
+        .image_scale()
+        .ok_or_else(|| JobError::Invalid(format!("bad scale {:?}", training.scale)))?;
+    let mode = effective_mode(dataset, training.mode);
+    let steps = training.steps_for(indices.len());
+    let config = RunConfig {
+        mode,
+        scale,
+        iterations: steps,
+        sh_degree: training.sh_degree,
+        seed: training.seed,
+        background: glam::Vec3::from_array(training.background),
+        ..RunConfig::default()
+    };
+
+    // Its photos, in the model's light (no survey light here), as targets of the mode.
+    let lights = ViewLights::new();
+    let focus = Focus {
+        dataset,
+        scale,
+        lights: &lights,
+        margin_px: CROP_MARGIN_PX,
+    };
+    let palette = Palette::default();
+    let targets = move |views: &mut [TrainView]| apply_mode(views, mode, &palette);
+    let views = focus.load(&indices, mode.uses_masks(), &targets)?;
+
+    // Its Gaussians: the initial model cut to the enlarged box, every one trainable.
+    let (mut splats, mut spec) = model_and_spec(dataset, &views, &config, mode)?;
+    let keep: Vec<bool> = splats
+        .means
+        .iter()
+        .map(|&p| plan.trains_on(k, plan.frame.coordinates(p).x))
+        .collect();
+    splats.retain(&keep);
+    if splats.is_empty() {
+        return Err(JobError::Invalid(format!(
+            "block {k}: no initial Gaussian lies in its box"
+        )));
+    }
+    ctx.log(format!(
+        "block {k}: {} photos, {} initial Gaussians, {steps} steps",
+        indices.len(),
+        splats.len()
+    ));
+
+    // Its region: each view cropped to the hull of the block's Gaussians.
+    let all: Vec<u32> = (0..splats.len() as u32).collect();
+    let regions = vec![0; all.len()];
+    let hull_config = HullConfig {
+        per_region: false,
+        ..HullConfig::default()
+    };
+    let placed: Vec<(usize, bool)> = indices.iter().map(|&i| (i, false)).collect();
+    let hulls = focus.draw_hulls(
+        &splats,
+        &all,
+        &regions,
+        &placed,
+        &hull_config,
+        config.background,
+        &mut |_, _| {},
+    )?;
+    let mut crops = Vec::new();
+    let mut region_pixels = 0.0;
+    for (view, hull) in views.iter().zip(&hulls) {
+        if hull.hulls.is_empty() {
+            continue;
+        }
+        region_pixels += hull.pixels as f64 / (hull.width as f64 * hull.height as f64);
+        crops.push(crop_to_hulls(view, &hull.hulls, CROP_MARGIN_PX));
+    }
+    if crops.is_empty() {
+        return Err(JobError::Invalid(format!(
+            "block {k}: its Gaussians are visible in none of its photos"
+        )));
+    }
+    let region_fraction = region_pixels / crops.len() as f64;
+    drop(views);
+    spec.iterations = steps;
+    let outcome = run_training(
+        ctx,
+        TrainSetup {
+            spec,
+            splats,
+            views: crops,
+            heldout: Vec::new(),
+        },
+        "block",
+    )?;
+    let record = BlockRecord {
+        plan_digest: plan.digest(),
+        block: k,
+        photos: indices.len(),
+        steps: outcome.steps,
+        gaussians: outcome.splats.len(),
+        seconds: started.elapsed().as_secs_f64(),
+        region_fraction,
+        peak_rss_mb: None,
+    };
+    Ok(BlockOutcome {
+        splats: outcome.splats,
+        record,
+        cancelled: outcome.cancelled,
+    })
+}
+
+/// Begins block `k`'s result folder: what dead runs left beside it is removed, and an
+/// unwritable plan folder fails now, before the training.
+pub fn begin_result(plan_dir: &Path, k: usize) -> Result<RunFolder, SceneError> {
+    RunFolder::begin(&result_folder(plan_dir, k), BLOCK_OUTPUTS)
+}
+
+/// Writes a trained block into its begun result folder and puts it in place, the model first
+/// and the record last (a record always describes the model beside it).
+pub fn commit_result(folder: RunFolder, outcome: &BlockOutcome) -> Result<(), SceneError> {
+    crate::splats::ply::write_splats(&folder.path("model.ply"), &outcome.splats)?;
+    let path = folder.path("block.json");
+    let text = serde_json::to_string_pretty(&outcome.record)
+        .map_err(|e| SceneError::invalid(&path, e.to_string()))?;
+    crate::scene::atomic::write_atomic(&path, |w| std::io::Write::write_all(w, text.as_bytes()))?;
+    folder.commit()
+}

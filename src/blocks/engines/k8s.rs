@@ -1,0 +1,150 @@
+//! Kubernetes: an Indexed Job (`completionMode: Indexed`, one completion per block; each pod
+//! gets `JOB_COMPLETION_INDEX`, which `train-block` reads) and a one-pod merge Job, both
+//! mounting one shared volume (a PersistentVolumeClaim, ReadWriteMany) at the same path, under
+//! which the plan folder and the dataset lie. Written as JSON, which `kubectl apply -f` reads
+//! like YAML; `apply.sh` applies the blocks, waits for them to complete, then applies the merge.
+
+use std::path::{Path, PathBuf};
+
+use serde_json::{Value, json};
+
+use crate::blocks::engines::{JobCommand, shell_line};
+use crate::scene::SceneError;
+use crate::scene::atomic::write_atomic;
+
+/// What the Jobs run on and ask for.
+#[derive(Clone, Debug)]
+pub struct K8sSettings {
+    /// Job name prefix (a DNS label: lower case, digits, '-').
+    pub name: String,
+    /// The container image holding the damage-twin binary at `JobCommand::binary`.
+    pub image: String,
+    /// The PersistentVolumeClaim of the shared volume.
+    pub claim: String,
+    /// Where the shared volume is mounted in every pod (the plan and the dataset are under it).
+    pub mount: PathBuf,
+    /// Blocks trained at once.
+    pub parallelism: usize,
+    pub cpus: usize,
+    pub mem_gb: usize,
+}
+
+fn pod_spec(settings: &K8sSettings, container: &str, command: Vec<String>) -> Value {
+    let quantity = json!({
+        "cpu": settings.cpus.max(1).to_string(),
+        "memory": format!("{}Gi", settings.mem_gb.max(1)),
+    });
+    json!({
+        "restartPolicy": "Never",
+        "containers": [{
+            "name": container,
+            "image": settings.image,
+            "command": command,
+            "resources": { "requests": quantity.clone(), "limits": quantity },
+            "volumeMounts": [{ "name": "shared", "mountPath": settings.mount.display().to_string() }],
+        }],
+        "volumes": [{
+            "name": "shared",
+            "persistentVolumeClaim": { "claimName": settings.claim },
+        }],
+    })
+}
+
+/// The Indexed Job of a plan's `blocks` blocks.
+pub fn blocks_job(command: &JobCommand, blocks: usize, settings: &K8sSettings) -> Value {
+    json!({
+        "apiVersion": "batch/v1",
+        "kind": "Job",
+        "metadata": {
+            "name": format!("{}-blocks", settings.name),
+            "labels": { "app.kubernetes.io/name": "damage-twin", "damage-twin/part": "blocks" },
+        },
+        "spec": {
+            "completionMode": "Indexed",
+            "completions": blocks,
+            "parallelism": settings.parallelism.clamp(1, blocks.max(1)),
+            // A killed block restarts cleanly (its run folder), so retrying is safe.
+            "backoffLimit": 2 * blocks.max(1),
+            "template": {
+                "metadata": { "labels": { "app.kubernetes.io/name": "damage-twin" } },
+                "spec": pod_spec(settings, "block", command.train_block()),
+            },
+        },
+    })
+}
+
+/// The merge Job, writing the merged model to `merged_out`.
+pub fn merge_job(command: &JobCommand, settings: &K8sSettings, merged_out: &Path) -> Value {
+    json!({
+        "apiVersion": "batch/v1",
+        "kind": "Job",
+        "metadata": {
+            "name": format!("{}-merge", settings.name),
+            "labels": { "app.kubernetes.io/name": "damage-twin", "damage-twin/part": "merge" },
+        },
+        "spec": {
+            "completions": 1,
+            "parallelism": 1,
+            "backoffLimit": 2,
+            "template": {
+                "metadata": { "labels": { "app.kubernetes.io/name": "damage-twin" } },
+                "spec": pod_spec(settings, "merge", command.merge(merged_out)),
+            },
+        },
+    })
+}
+
+/// Where `write_k8s` put the files.
+#[derive(Clone, Debug)]
+pub struct K8sPaths {
+    pub blocks: PathBuf,
+    pub merge: PathBuf,
+    pub apply: PathBuf,
+}
+
+/// Writes both Jobs and `apply.sh` into `dir`.
+pub fn write_k8s(
+    dir: &Path,
+    command: &JobCommand,
+    blocks: usize,
+    settings: &K8sSettings,
+    merged_out: &Path,
+) -> Result<K8sPaths, SceneError> {
+    std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
+    let paths = K8sPaths {
+        blocks: dir.join("blocks-job.json"),
+        merge: dir.join("merge-job.json"),
+        apply: dir.join("apply.sh"),
+    };
+    let pretty = |v: &Value| serde_json::to_string_pretty(v).unwrap_or_default() + "\n";
+    let apply = format!(
+        "#!/bin/bash\n\
+         # Applies the block Job, waits for every block, then applies the merge Job.\n\
+         set -euo pipefail\n\
+         here=\"$(cd \"$(dirname \"$0\")\" && pwd)\"\n\
+         kubectl apply -f \"$here/blocks-job.json\"\n\
+         kubectl wait --for=condition=complete --timeout=-1s job/{}\n\
+         kubectl apply -f \"$here/merge-job.json\"\n",
+        shell_line(&[format!("{}-blocks", settings.name)])
+    );
+    for (path, text) in [
+        (
+            &paths.blocks,
+            pretty(&blocks_job(command, blocks, settings)),
+        ),
+        (
+            &paths.merge,
+            pretty(&merge_job(command, settings, merged_out)),
+        ),
+        (&paths.apply, apply),
+    ] {
+        write_atomic(path, |w| std::io::Write::write_all(w, text.as_bytes()))?;
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&paths.apply, std::fs::Permissions::from_mode(0o755))
+            .map_err(|e| SceneError::io(&paths.apply, e))?;
+    }
+    Ok(paths)
+}

@@ -1,0 +1,99 @@
+//! The merge: every trained block's Gaussians inside its own un-enlarged box (VastGaussian's
+//! rule: what a block learnt in its margins belongs to its neighbour), put together into one
+//! model with fresh ids. The blocks must share the SH degree and label channels (one plan's
+//! blocks do).
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::blocks::block_run::{finished, result_folder};
+use crate::blocks::plan::Plan;
+use crate::scene::SceneError;
+use crate::splats::Splats;
+
+/// What each block gave the merged model.
+#[derive(Clone, Debug, Serialize)]
+pub struct MergedBlock {
+    pub block: usize,
+    /// Gaussians the block trained, and those inside its own box that were kept.
+    pub trained: usize,
+    pub kept: usize,
+    pub skipped: Option<String>,
+}
+
+/// Reads every block's result in `plan_dir` and keeps each block's Gaussians inside its box.
+/// A block neither skipped nor finished for this plan is an error naming it.
+pub fn merge_blocks(
+    plan_dir: &Path,
+    plan: &Plan,
+) -> Result<(Splats, Vec<MergedBlock>), SceneError> {
+    let mut merged: Option<Splats> = None;
+    let mut blocks = Vec::new();
+    for (k, block) in plan.blocks.iter().enumerate() {
+        if let Some(why) = &block.skipped {
+            blocks.push(MergedBlock {
+                block: k,
+                trained: 0,
+                kept: 0,
+                skipped: Some(why.clone()),
+            });
+            continue;
+        }
+        let folder = result_folder(plan_dir, k);
+        if finished(plan_dir, plan, k).is_none() {
+            return Err(SceneError::invalid(
+                &folder,
+                format!(
+                    "block {k} has no finished result for this plan: run train-block with --block {k}"
+                ),
+            ));
+        }
+        let splats = crate::splats::ply::read_splats(&folder.join("model.ply"))?;
+        let into =
+            merged.get_or_insert_with(|| Splats::empty(splats.sh_degree, splats.label_channels));
+        if into.sh_degree != splats.sh_degree || into.label_channels != splats.label_channels {
+            return Err(SceneError::invalid(
+                folder.join("model.ply"),
+                format!(
+                    "SH degree {} and {} label channels differ from the other blocks' {} and {}",
+                    splats.sh_degree, splats.label_channels, into.sh_degree, into.label_channels
+                ),
+            ));
+        }
+        if into.overlay.is_none() {
+            into.overlay = splats.overlay;
+        }
+        let mut kept = 0;
+        for g in 0..splats.len() {
+            if !plan.keeps(k, plan.frame.coordinates(splats.means[g]).x) {
+                continue;
+            }
+            let id = into.len() as u64;
+            into.push(
+                splats.means[g],
+                splats.log_scales[g],
+                splats.rotations[g],
+                splats.raw_opacities[g],
+                splats.sh_of(g),
+                splats.labels_of(g),
+                id,
+                splats.meta.survey[g],
+            );
+            let last = into.len() - 1;
+            into.meta.damage_survey[last] = splats.meta.damage_survey[g];
+            into.meta.state[last] = splats.meta.state[g];
+            kept += 1;
+        }
+        blocks.push(MergedBlock {
+            block: k,
+            trained: splats.len(),
+            kept,
+            skipped: None,
+        });
+    }
+    let merged = merged.filter(|m| !m.is_empty()).ok_or_else(|| {
+        SceneError::invalid(plan_dir, "no block kept any Gaussian: nothing to merge")
+    })?;
+    Ok((merged, blocks))
+}

@@ -1,0 +1,254 @@
+//! `damage-twin cluster slurm|k8s|local PLAN`: runs a plan's blocks through an engine. `slurm`
+//! and `k8s` write the engine's job files into the plan folder (`blocks::engines`); `local`
+//! runs the blocks as child processes of this binary, N at a time, then merges when asked.
+//! docs/CLUSTER.md says what each engine needs.
+
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command};
+
+use anyhow::Context;
+
+use damage_twin::blocks::block_run::finished;
+use damage_twin::blocks::engines::JobCommand;
+use damage_twin::blocks::engines::k8s::{K8sSettings, write_k8s};
+use damage_twin::blocks::engines::slurm::{SlurmResources, slurm_scripts, write_slurm};
+use damage_twin::blocks::{Plan, load_plan, plan_folder};
+
+#[derive(clap::Subcommand, Debug)]
+pub enum Cluster {
+    /// Write an sbatch array script (one task per block), a merge script that runs after it
+    /// (--dependency=afterok) and submit.sh into PLAN/slurm/.
+    Slurm(SlurmArgs),
+    /// Write a Kubernetes Indexed Job (one completion per block), a merge Job and apply.sh into
+    /// PLAN/k8s/.
+    K8s(K8sArgs),
+    /// Run the blocks as N local processes of this binary, then merge with --out.
+    Local(LocalArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct Common {
+    /// The plan folder (the shared directory).
+    pub plan: PathBuf,
+    /// Where the merge job writes the merged model (default: PLAN/merged).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// The damage-twin binary every node runs (default: this one; same path on every node).
+    #[arg(long)]
+    pub binary: Option<PathBuf>,
+    /// Threads per block job (default: the job's CPUs).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct SlurmArgs {
+    #[command(flatten)]
+    pub common: Common,
+    #[arg(long, default_value_t = 8)]
+    pub cpus: usize,
+    /// Memory per job in GiB.
+    #[arg(long, default_value_t = 16)]
+    pub mem: usize,
+    /// Wall-time limit per job (Slurm's HH:MM:SS or D-HH:MM:SS).
+    #[arg(long, default_value = "04:00:00")]
+    pub time: String,
+    #[arg(long)]
+    pub partition: Option<String>,
+    #[arg(long, default_value = "damage-twin")]
+    pub job_name: String,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct K8sArgs {
+    #[command(flatten)]
+    pub common: Common,
+    /// Container image with the binary at --binary.
+    #[arg(long, default_value = "damage-twin:latest")]
+    pub image: String,
+    /// PersistentVolumeClaim of the shared volume (ReadWriteMany).
+    #[arg(long, default_value = "damage-twin-shared")]
+    pub claim: String,
+    /// Mount path of the shared volume in every pod (default: the deepest folder holding both
+    /// the plan folder and the dataset).
+    #[arg(long)]
+    pub mount: Option<PathBuf>,
+    #[arg(long, default_value_t = 4)]
+    pub parallelism: usize,
+    #[arg(long, default_value_t = 8)]
+    pub cpus: usize,
+    #[arg(long, default_value_t = 16)]
+    pub mem: usize,
+    #[arg(long, default_value = "damage-twin")]
+    pub name: String,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct LocalArgs {
+    /// The plan folder.
+    pub plan: PathBuf,
+    /// Blocks trained at once.
+    #[arg(long, default_value_t = 1)]
+    pub workers: usize,
+    /// Threads per worker (default: the cores shared out among the workers).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Merge into this folder once every block is trained.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+pub fn run(command: Cluster) -> anyhow::Result<()> {
+    match command {
+        Cluster::Slurm(args) => slurm(args),
+        Cluster::K8s(args) => k8s(args),
+        Cluster::Local(args) => local(args),
+    }
+}
+
+/// The plan, its folder (absolute) and the command every job runs.
+fn job_command(common: &Common) -> anyhow::Result<(Plan, PathBuf, JobCommand, PathBuf)> {
+    let plan = load_plan(&common.plan)?;
+    let dir = std::fs::canonicalize(plan_folder(&common.plan))
+        .with_context(|| format!("opening plan folder {}", common.plan.display()))?;
+    let binary = match &common.binary {
+        Some(b) => b.clone(),
+        None => std::env::current_exe().context("finding this binary's path")?,
+    };
+    let model = common.model.clone().unwrap_or_else(|| dir.join("merged"));
+    let command = JobCommand {
+        binary,
+        plan_dir: dir.clone(),
+        threads: common.threads,
+    };
+    Ok((plan, dir, command, model))
+}
+
+fn slurm(args: SlurmArgs) -> anyhow::Result<()> {
+    let (plan, dir, command, model) = job_command(&args.common)?;
+    let resources = SlurmResources {
+        job_name: args.job_name,
+        cpus: args.cpus,
+        mem_gb: args.mem,
+        time: args.time,
+        partition: args.partition,
+    };
+    let logs = dir.join("logs");
+    let scripts = slurm_scripts(&command, plan.blocks.len(), &resources, &model, &logs);
+    let paths = write_slurm(&dir.join("slurm"), &scripts, &logs)?;
+    println!(
+        "wrote {} ({} array tasks), {} and {}: run {}",
+        paths.blocks.display(),
+        plan.blocks.len(),
+        paths.merge.display(),
+        paths.submit.display(),
+        paths.submit.display()
+    );
+    Ok(())
+}
+
+/// The deepest folder holding both `a` and `b`.
+fn common_ancestor(a: &Path, b: &Path) -> PathBuf {
+    let mut shared = PathBuf::new();
+    for (x, y) in a.components().zip(b.components()) {
+        if x != y {
+            break;
+        }
+        shared.push(x);
+    }
+    shared
+}
+
+fn k8s(args: K8sArgs) -> anyhow::Result<()> {
+    let (plan, dir, command, model) = job_command(&args.common)?;
+    let mount = args
+        .mount
+        .unwrap_or_else(|| common_ancestor(&dir, &plan.dataset));
+    for path in [&dir, &plan.dataset, &model] {
+        if !path.starts_with(&mount) {
+            anyhow::bail!(
+                "{} is not under the shared volume's mount {}: pods would not see it",
+                path.display(),
+                mount.display()
+            );
+        }
+    }
+    let settings = K8sSettings {
+        name: args.name,
+        image: args.image,
+        claim: args.claim,
+        mount,
+        parallelism: args.parallelism,
+        cpus: args.cpus,
+        mem_gb: args.mem,
+    };
+    let paths = write_k8s(
+        &dir.join("k8s"),
+        &command,
+        plan.blocks.len(),
+        &settings,
+        &model,
+    )?;
+    println!(
+        "wrote {} ({} completions), {} and {}: run {}",
+        paths.blocks.display(),
+        plan.blocks.len(),
+        paths.merge.display(),
+        paths.apply.display(),
+        paths.apply.display()
+    );
+    Ok(())
+}
+
+fn local(args: LocalArgs) -> anyhow::Result<()> {
+    let plan = load_plan(&args.plan)?;
+    let dir = plan_folder(&args.plan);
+    let workers = args.workers.max(1);
+    let threads = args.threads.unwrap_or_else(|| {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        (cores / workers).max(1)
+    });
+    let binary = std::env::current_exe().context("finding this binary's path")?;
+    let mut queue: VecDeque<usize> = (0..plan.blocks.len())
+        .filter(|&k| plan.blocks[k].skipped.is_none() && finished(&dir, &plan, k).is_none())
+        .collect();
+    println!(
+        "{} blocks to train on {workers} local workers ({threads} threads each)",
+        queue.len()
+    );
+    let mut running: Vec<(usize, Child)> = Vec::new();
+    let mut failed = Vec::new();
+    while !queue.is_empty() || !running.is_empty() {
+        while running.len() < workers
+            && let Some(k) = queue.pop_front()
+        {
+            let child = Command::new(&binary)
+                .arg("train-block")
+                .arg(&dir)
+                .args(["--block", &k.to_string(), "--quiet"])
+                .args(["--threads", &threads.to_string()])
+                .spawn()
+                .with_context(|| format!("starting block {k}"))?;
+            running.push((k, child));
+        }
+        // Waits on the oldest; the others keep running meanwhile.
+        let (k, mut child) = running.remove(0);
+        let status = child
+            .wait()
+            .with_context(|| format!("waiting for block {k}"))?;
+        if !status.success() {
+            eprintln!("block {k} failed ({status})");
+            failed.push(k);
+        }
+    }
+    if !failed.is_empty() {
+        anyhow::bail!(
+            "blocks {failed:?} failed; rerun `cluster local` to retrain only them (finished blocks are kept)"
+        );
+    }
+    if let Some(out) = &args.out {
+        println!("{}", super::merge::merge(&args.plan, out, true)?);
+    }
+    Ok(())
+}
