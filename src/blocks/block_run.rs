@@ -1,8 +1,9 @@
 //! One block, one job: block K of a plan trained through the focused-run seam (`train::focus`):
 //! only its photos, loaded in the model's light, only the Gaussians of its enlarged box (the
 //! dataset's initial model cut to the box, all of them trainable), and only its region of each
-//! photo (each view cropped to the hull of those Gaussians, which is also the loss region, so
-//! the rest of the structure seen behind the block neither trains it nor costs a step). The
+//! photo (each view cropped to the hull of those Gaussians, which is also the loss region, less
+//! the pixels where the sparse points show the rest of the structure in front: `region`; so the
+//! rest of the structure seen past the block neither trains it nor costs a step). The
 //! result goes into the plan folder as a run folder (`scene::run_folder`): a kill leaves no
 //! result or a whole one, and the next run cleans what the dead one left.
 
@@ -13,6 +14,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::blocks::plan::Plan;
+use crate::blocks::region::{block_pixels, inside_block};
 use crate::damage::Palette;
 use crate::damage::setup::{RunConfig, apply_mode, effective_mode, model_and_spec};
 use crate::scene::run_folder::RunFolder;
@@ -127,7 +129,7 @@ pub fn train_block(
     };
     let palette = Palette::default();
     let targets = move |views: &mut [TrainView]| apply_mode(views, mode, &palette);
-    let views = focus.load(&indices, mode.uses_masks(), &targets)?;
+    let mut views = focus.load(&indices, mode.uses_masks(), &targets)?;
 
     // Its Gaussians: the initial model cut to the enlarged box, every one trainable.
     let (mut splats, mut spec) = model_and_spec(dataset, &views, &config, mode)?;
@@ -167,12 +169,29 @@ pub fn train_block(
     )?;
     let mut crops = Vec::new();
     let mut region_pixels = 0.0;
-    for (view, hull) in views.iter().zip(&hulls) {
+    // Where the sparse points show the rest of the structure in front, the photo is not the
+    // block's to explain (`region`).
+    let points: Vec<glam::Vec3> = dataset
+        .points
+        .as_ref()
+        .map(|p| p.positions.clone())
+        .unwrap_or_default();
+    let inside = inside_block(plan, k, &points);
+    for (view, hull) in views.iter_mut().zip(&hulls) {
         if hull.hulls.is_empty() {
             continue;
         }
-        region_pixels += hull.pixels as f64 / (hull.width as f64 * hull.height as f64);
-        crops.push(crop_to_hulls(view, &hull.hulls, CROP_MARGIN_PX));
+        let mut owned = block_pixels(&view.camera, &points, &inside);
+        if let Some(used) = &view.region {
+            for (o, u) in owned.data.iter_mut().zip(&used.data) {
+                *o &= u;
+            }
+        }
+        view.region = Some(owned);
+        let crop = crop_to_hulls(view, &hull.hulls, CROP_MARGIN_PX);
+        let trained = crop.region.as_ref().map_or(0, |r| r.count());
+        region_pixels += trained as f64 / (hull.width as f64 * hull.height as f64);
+        crops.push(crop);
     }
     if crops.is_empty() {
         return Err(JobError::Invalid(format!(

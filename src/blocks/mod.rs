@@ -14,6 +14,7 @@ pub mod merge;
 pub mod partition;
 pub mod picture;
 pub mod plan;
+pub mod region;
 pub mod seam;
 
 use std::path::Path;

@@ -232,14 +232,26 @@ fn local(args: LocalArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("starting block {k}"))?;
             running.push((k, child));
         }
-        // Waits on the oldest; the others keep running meanwhile.
-        let (k, mut child) = running.remove(0);
-        let status = child
-            .wait()
-            .with_context(|| format!("waiting for block {k}"))?;
-        if !status.success() {
-            eprintln!("block {k} failed ({status})");
-            failed.push(k);
+        // Whichever block ends first frees its worker for the next.
+        let mut ended = None;
+        for (i, (k, child)) in running.iter_mut().enumerate() {
+            if let Some(status) = child
+                .try_wait()
+                .with_context(|| format!("waiting for block {k}"))?
+            {
+                ended = Some((i, status));
+                break;
+            }
+        }
+        match ended {
+            Some((i, status)) => {
+                let (k, _) = running.remove(i);
+                if !status.success() {
+                    eprintln!("block {k} failed ({status})");
+                    failed.push(k);
+                }
+            }
+            None => std::thread::sleep(std::time::Duration::from_millis(100)),
         }
     }
     if !failed.is_empty() {
