@@ -224,6 +224,21 @@ fn cluster_local_merges_and_a_killed_block_rerun_gives_the_same_model() {
         1,
         "the killed run left its staging folder"
     );
+    // The merge names the block that has no result rather than merging a part.
+    let mut early = binary();
+    early
+        .arg("merge")
+        .arg(&killed)
+        .arg("--out")
+        .arg(root.path().join("early"));
+    let output = early.output().unwrap();
+    assert!(!output.status.success());
+    let error = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        error.contains("block 0 has no finished result") && error.lines().count() == 1,
+        "{error}"
+    );
+    assert!(!root.path().join("early").exists());
     let merged_killed = root.path().join("merged-killed");
     let mut local = binary();
     local
