@@ -165,6 +165,13 @@ fn k8s(args: K8sArgs) -> anyhow::Result<()> {
     let mount = args
         .mount
         .unwrap_or_else(|| common_ancestor(&dir, &plan.dataset));
+    if mount.parent().is_none() {
+        anyhow::bail!(
+            "the shared volume cannot be mounted at the root: give --mount, the folder holding the plan folder {} and the dataset {}",
+            dir.display(),
+            plan.dataset.display()
+        );
+    }
     for path in [&dir, &plan.dataset, &model] {
         if !path.starts_with(&mount) {
             anyhow::bail!(
