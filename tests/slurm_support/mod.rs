@@ -104,8 +104,17 @@ impl SlurmCluster {
     /// `start`, or `None` after printing why the test skips; with `DAMAGE_TWIN_REQUIRE_SLURM=1`
     /// a cluster that cannot start fails the test instead.
     pub fn start_or_skip(test: &str) -> Option<SlurmCluster> {
+        let started = Instant::now();
         match SlurmCluster::start() {
-            Ok(cluster) => Some(cluster),
+            Ok(cluster) => {
+                eprintln!(
+                    "{test}: Slurm node {} ({} CPUs) idle after {:.1} s",
+                    cluster.node,
+                    cluster.cpus,
+                    started.elapsed().as_secs_f64()
+                );
+                Some(cluster)
+            }
             Err(reason) => {
                 if std::env::var("DAMAGE_TWIN_REQUIRE_SLURM").as_deref() == Ok("1") {
                     panic!("{test}: Slurm is required here but cannot start: {reason}");
