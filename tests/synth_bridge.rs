@@ -115,7 +115,7 @@ fn the_default_strips_see_every_span_from_both_sides_and_from_under_the_deck() {
         // The soffit between the two inner girders, seen only from under the deck.
         let soffit = seen_by(&world, &params, Vec3::new(x, 0.0, CLEARANCE));
         eprintln!("span {span}: girder seen by {front} (front), {back} (back); soffit by {soffit}");
-        assert!(front >= 10 && back >= 10 && soffit >= 3, "span {span}");
+        assert!(front >= 8 && back >= 8 && soffit >= 3, "span {span}");
     }
     let pier = seen_by(&world, &params, Vec3::new(SPAN, -SIDE_PLANE, 2.0));
     assert!(pier >= 5, "pier 1's column seen by {pier}");

@@ -48,7 +48,7 @@ const DAEMONS: [&str; 3] = [
     "/usr/sbin/slurmctld",
     "/usr/sbin/slurmd",
 ];
-const CLIENTS: [&str; 4] = ["sbatch", "sinfo", "scancel", "squeue"];
+const CLIENTS: [&str; 5] = ["sbatch", "sinfo", "scancel", "squeue", "scontrol"];
 /// How long the daemons get to bring the node up (measured: about 2 s).
 const START_TIMEOUT: Duration = Duration::from_secs(30);
 
@@ -177,6 +177,57 @@ impl SlurmCluster {
             stdout,
             stderr,
         })
+    }
+
+    /// Waits until job `job_id` (all its array tasks) has left the queue, polling every 0.2 s,
+    /// and returns each record's `JobState` and `ExitCode` from `scontrol show job` (kept for
+    /// `MinJobAge`, 60 s): for a job submitted by something else, e.g. a dependent merge job.
+    pub fn wait_for_job(
+        &self,
+        job_id: u64,
+        timeout: Duration,
+    ) -> Result<Vec<(String, String)>, String> {
+        let start = Instant::now();
+        let id = job_id.to_string();
+        loop {
+            let queued = self
+                .command("squeue")
+                .args(["-h", "-j", &id, "-o", "%T"])
+                .output()
+                .map_err(|e| format!("squeue: {e}"))?;
+            let states = String::from_utf8_lossy(&queued.stdout).to_string();
+            if queued.status.success() && states.trim().is_empty() {
+                break;
+            }
+            if start.elapsed() > timeout {
+                return Err(format!(
+                    "job {job_id} still queued after {timeout:?}: {}",
+                    states.trim()
+                ));
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        let shown = self
+            .command("scontrol")
+            .args(["show", "job", &id, "--oneliner"])
+            .output()
+            .map_err(|e| format!("scontrol: {e}"))?;
+        let text = String::from_utf8_lossy(&shown.stdout);
+        let field = |line: &str, key: &str| {
+            line.split_whitespace()
+                .find_map(|kv| kv.strip_prefix(key)?.strip_prefix('='))
+                .unwrap_or("")
+                .to_string()
+        };
+        let records: Vec<(String, String)> = text
+            .lines()
+            .filter(|l| l.contains("JobState="))
+            .map(|l| (field(l, "JobState"), field(l, "ExitCode")))
+            .collect();
+        if records.is_empty() {
+            return Err(format!("scontrol show job {job_id}: {}", text.trim()));
+        }
+        Ok(records)
     }
 
     /// The tails of the daemons' logs, for failure messages.
