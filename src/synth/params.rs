@@ -121,8 +121,8 @@ impl SynthParams {
         }
     }
 
-    /// The built-in bridge: 6 spans of 20 m, 360 + 120 views at 960×540 (side strips at two
-    /// heights on both sides and a strip under the deck).
+    /// The built-in bridge of `spans` 20 m spans (the CLI's default is 6): 360 + 120 views at
+    /// 960×540 (side strips at two heights on both sides and a strip under the deck).
     pub fn bridge(out: impl Into<PathBuf>, spans: u32) -> SynthParams {
         SynthParams {
             views: 360,
