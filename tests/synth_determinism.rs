@@ -1,11 +1,13 @@
 //! synth is deterministic (same seed, byte-identical files) and its mask noise corrupts exactly
 //! the requested fraction of views while `truth/` keeps the clean masks.
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+mod synth_support;
+
+use std::path::Path;
 
 use damage_twin::damage::DamageClass;
 use damage_twin::synth::{self, SynthParams};
+use synth_support::files;
 
 fn params(out: &Path, mask_noise: f32) -> SynthParams {
     SynthParams {
@@ -17,24 +19,6 @@ fn params(out: &Path, mask_noise: f32) -> SynthParams {
         mask_noise,
         ..SynthParams::demo(out)
     }
-}
-
-/// Every file under `root`, relative path to bytes.
-fn files(root: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-            } else {
-                let rel = path.strip_prefix(root).unwrap().to_path_buf();
-                out.insert(rel, std::fs::read(&path).unwrap());
-            }
-        }
-    }
-    out
 }
 
 #[test]

@@ -20,12 +20,18 @@ pub struct Args {
     pub width: u32,
     #[arg(long, default_value_t = 540)]
     pub height: u32,
-    /// Views of survey 1.
-    #[arg(long, default_value_t = 60)]
-    pub views: usize,
-    /// Views of survey 2.
-    #[arg(long, default_value_t = 12)]
-    pub views_survey2: usize,
+    /// What to generate: `building` (the RC frame) or `bridge` (a multi-span girder bridge).
+    #[arg(long, value_enum, default_value_t = StructureArg::Building)]
+    pub structure: StructureArg,
+    /// Spans of the bridge (`--structure bridge` only; 20 m each).
+    #[arg(long)]
+    pub spans: Option<u32>,
+    /// Views of survey 1 (default: 60 for the building, 360 for the bridge).
+    #[arg(long)]
+    pub views: Option<usize>,
+    /// Views of survey 2 (default: 12 for the building, 120 for the bridge).
+    #[arg(long)]
+    pub views_survey2: Option<usize>,
     /// Number of surveys (1 or 2).
     #[arg(long, default_value_t = 2)]
     pub surveys: u32,
@@ -47,13 +53,31 @@ pub struct Args {
     pub survey2_frame: Survey2Frame,
 }
 
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StructureArg {
+    Building,
+    Bridge,
+}
+
+/// The bridge's default span count.
+const DEFAULT_SPANS: u32 = 6;
+
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let base = match args.structure {
+        StructureArg::Building => {
+            if args.spans.is_some() {
+                anyhow::bail!("--spans applies to --structure bridge only");
+            }
+            SynthParams::demo(&args.out)
+        }
+        StructureArg::Bridge => SynthParams::bridge(&args.out, args.spans.unwrap_or(DEFAULT_SPANS)),
+    };
     let params = SynthParams {
         seed: args.seed,
         width: args.width,
         height: args.height,
-        views: args.views,
-        views_survey2: args.views_survey2,
+        views: args.views.unwrap_or(base.views),
+        views_survey2: args.views_survey2.unwrap_or(base.views_survey2),
         surveys: args.surveys,
         mask_noise: args.mask_noise,
         component_colours: args.component_colours,
@@ -61,7 +85,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bays_x: args.bays_x,
         bays_y: args.bays_y,
         survey2_frame: args.survey2_frame,
-        ..SynthParams::demo(&args.out)
+        ..base
     };
     let start = Instant::now();
     let bar = ProgressBar::new(0);

@@ -87,7 +87,11 @@ pub struct DamageState {
 }
 
 impl DamageState {
-    fn new(cracks: [Vec<Crack>; 4], spalls: Vec<Spall>, building: &Building) -> DamageState {
+    pub(super) fn new(
+        cracks: [Vec<Crack>; 4],
+        spalls: Vec<Spall>,
+        building: &Building,
+    ) -> DamageState {
         let fields = std::array::from_fn(|f| {
             let fa = &building.facades[f];
             CrackField::new(&cracks[f], fa.u_range, (fa.v_range.0, fa.v_range.1 + 1.0))
@@ -296,25 +300,25 @@ pub fn generate(building: &Building, seed: u64) -> (DamageState, DamageState) {
 
 /// Hands out region ids in order.
 #[derive(Default)]
-struct RegionIds {
+pub(super) struct RegionIds {
     next: u32,
 }
 
 impl RegionIds {
-    fn take(&mut self) -> u32 {
+    pub(super) fn take(&mut self) -> u32 {
         self.next += 1;
         self.next - 1
     }
 }
 
-fn facade_bounds(f: &Facade) -> (Vec2, Vec2) {
+pub(super) fn facade_bounds(f: &Facade) -> (Vec2, Vec2) {
     (
         Vec2::new(f.u_range.0, f.v_range.0 + 0.16),
         Vec2::new(f.u_range.1, f.v_range.1 + 0.8),
     )
 }
 
-fn crack_width(rng: &mut fastrand::Rng) -> f32 {
+pub(super) fn crack_width(rng: &mut fastrand::Rng) -> f32 {
     0.025 + 0.03 * rng.f32()
 }
 

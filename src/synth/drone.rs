@@ -98,3 +98,77 @@ pub fn survey_path(
     }
     cams
 }
+
+/// The cameras of a bridge survey (`bridge::bridge` with `spans` spans), `views` of them, in
+/// flight order: strips along the front side at two heights (pier columns, then girders), a
+/// strip under the deck on the centre line looking up and ahead at the girders' inner faces, the
+/// soffit and the pier caps, then the back side at two heights. Survey 2 flies farther out and at
+/// other heights. A fifth of the views fly under the deck.
+pub fn bridge_path(spans: u32, survey: u32, views: usize, k: Intrinsics, seed: u64) -> Vec<Camera> {
+    use super::bridge::{SIDE_PLANE, length};
+    let mut rng = fastrand::Rng::with_seed(seed ^ (0xB20E_0000 + survey as u64));
+    let len = length(spans);
+    let first = survey <= 1;
+    let under = views / 5;
+    let sides = views - under;
+    let (distance, heights) = if first {
+        (9.0, [(3.4, 4.4), (6.6, 6.2)])
+    } else {
+        (10.5, [(4.0, 4.6), (7.4, 6.4)])
+    };
+    // (side, eye height, target height) per pass, in flight order.
+    let passes = [
+        (-1.0, heights[0]),
+        (-1.0, heights[1]),
+        (1.0, heights[1]),
+        (1.0, heights[0]),
+    ];
+    let along = |i: usize, n: usize, margin: f32| {
+        -margin + (i as f32 + 0.5) / n as f32 * (len + 2.0 * margin)
+    };
+    let mut cams = Vec::with_capacity(views);
+    for (p, &(side, (z_eye, z_target))) in passes.iter().enumerate() {
+        let n = sides / 4 + usize::from(p < sides % 4);
+        if p == 2 {
+            push_under_strip(&mut cams, &mut rng, under, len, first, k);
+        }
+        for i in 0..n {
+            let x = along(i, n, 2.0);
+            let eye = Vec3::new(
+                x,
+                side * (SIDE_PLANE + distance + rng.f32()),
+                z_eye + 0.5 * rng.f32(),
+            );
+            let target = Vec3::new(
+                x + (rng.f32() - 0.5) * 5.0,
+                side * SIDE_PLANE,
+                z_target + (rng.f32() - 0.5) * 0.6,
+            );
+            cams.push(Camera::look_at(k, eye, target, Vec3::Z));
+        }
+    }
+    cams
+}
+
+fn push_under_strip(
+    cams: &mut Vec<Camera>,
+    rng: &mut fastrand::Rng,
+    n: usize,
+    len: f32,
+    first: bool,
+    k: Intrinsics,
+) {
+    use super::bridge::{CLEARANCE, girder_bottom};
+    let z_eye = if first { 3.2 } else { 3.6 };
+    for i in 0..n {
+        let x = (i as f32 + 0.5) / n as f32 * len;
+        let ahead = if i % 2 == 0 { 5.0 } else { -5.0 };
+        let eye = Vec3::new(x, (rng.f32() - 0.5) * 0.8, z_eye + 0.4 * rng.f32());
+        let target = Vec3::new(
+            x + ahead,
+            if (i / 2) % 2 == 0 { 2.2 } else { -2.2 },
+            0.5 * (girder_bottom() + CLEARANCE),
+        );
+        cams.push(Camera::look_at(k, eye, target, Vec3::Z));
+    }
+}

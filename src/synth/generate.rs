@@ -8,6 +8,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::bridge::{self, BridgeLayout};
+use super::bridge_damage;
 use super::building::{Building, BuildingSpec};
 use super::corrupt;
 use super::damage::{self, DamagePoint, DamageState};
@@ -16,7 +18,7 @@ use super::geometry::{Component, Geometry};
 use super::joint::{self, JointFrame, Similarity, new_view_name};
 use super::lighting::{AoMaps, Lighting};
 use super::noise::{hash3, seed32};
-use super::params::{Survey2Frame, SurveyOutput, SynthError, SynthOutput, SynthParams};
+use super::params::{Structure, Survey2Frame, SurveyOutput, SynthError, SynthOutput, SynthParams};
 use super::quantities;
 use super::render::{SceneContext, ViewRender, render_view};
 use super::write;
@@ -26,32 +28,46 @@ use crate::scene::colmap::{ColmapCamera, ColmapImage, ColmapModel, ColmapPoint, 
 
 /// The scene shared by both surveys.
 pub struct World {
+    /// The structure: the building, or the bridge described in the building's terms.
     pub building: Building,
     pub geometry: Geometry,
     pub ao: AoMaps,
     /// Survey 1's and survey 2's damage.
     pub damage: [DamageState; 2],
+    /// A bridge's spans whose damage survey 2 changed (empty for the building).
+    pub changed_spans: Vec<u32>,
 }
 
 impl World {
     pub fn new(params: &SynthParams) -> World {
-        let building = Building::new(BuildingSpec {
-            floors: params.floors,
-            bays_x: params.bays_x,
-            bays_y: params.bays_y,
-            bay_width: 4.0,
-            bay_depth: 4.5,
-            storey: 3.2,
-            seed: seed32(params.seed, 1),
-        });
+        let (building, damage, changed_spans) = match params.structure {
+            Structure::Building => {
+                let building = Building::new(BuildingSpec {
+                    floors: params.floors,
+                    bays_x: params.bays_x,
+                    bays_y: params.bays_y,
+                    bay_width: 4.0,
+                    bay_depth: 4.5,
+                    storey: 3.2,
+                    seed: seed32(params.seed, 1),
+                });
+                let (d1, d2) = damage::generate(&building, params.seed);
+                (building, [d1, d2], Vec::new())
+            }
+            Structure::Bridge { spans } => {
+                let building = bridge::bridge(spans, seed32(params.seed, 1));
+                let d = bridge_damage::generate(&building, spans, params.seed);
+                (building, [d.survey1, d.survey2], d.changed_spans)
+            }
+        };
         let geometry = Geometry::new(building.prims.clone());
         let ao = AoMaps::bake(&geometry, &building);
-        let (d1, d2) = damage::generate(&building, params.seed);
         World {
             building,
             geometry,
             ao,
-            damage: [d1, d2],
+            damage,
+            changed_spans,
         }
     }
 
@@ -63,7 +79,10 @@ impl World {
         } else {
             params.views_survey2
         };
-        drone::survey_path(&self.building, survey, n, k, params.seed)
+        match params.structure {
+            Structure::Building => drone::survey_path(&self.building, survey, n, k, params.seed),
+            Structure::Bridge { spans } => drone::bridge_path(spans, survey, n, k, params.seed),
+        }
     }
 
     /// Surface points of survey `survey`'s damage every `spacing` metres; with `only_new`, only
@@ -267,9 +286,13 @@ fn write_survey(
             spalls: state.spalls.len(),
             spalls_with_rebar: state.spalls.iter().filter(|s| s.rebar.is_some()).count(),
         },
-        world: "z up, metres; ground plane z = 0; building frame from (0, 0) to (bays_x * 4, bays_y * 4.5); \
-            cameras in COLMAP convention (world-to-camera, x right, y down, z forward)"
-            .to_string(),
+        world: match params.structure {
+            Structure::Building => "z up, metres; ground plane z = 0; building frame from (0, 0) to \
+                (bays_x * 4, bays_y * 4.5); cameras in COLMAP convention (world-to-camera, x right, \
+                y down, z forward)"
+                .to_string(),
+            Structure::Bridge { .. } => bridge::WORLD.to_string(),
+        },
         frame: if joint {
             write::JOINT_FRAME.to_string()
         } else {
@@ -278,6 +301,10 @@ fn write_survey(
         quantities: quantities::SCHEMA.to_string(),
     };
     write::manifest(&dir.join("truth/manifest.ron"), &manifest)?;
+    if let Structure::Bridge { spans } = params.structure {
+        let layout = BridgeLayout::new(spans, &world.changed_spans);
+        write::json(&dir.join("truth/bridge.json"), &layout)?;
+    }
 
     let mut views_with_class = [0; 3];
     for r in &results {

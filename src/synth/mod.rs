@@ -3,6 +3,8 @@
 //! Must not depend on the trainer; same seed, same bytes.
 
 pub mod area;
+pub mod bridge;
+pub mod bridge_damage;
 pub mod building;
 pub mod corrupt;
 pub mod cracks;
@@ -21,4 +23,4 @@ pub mod render;
 pub mod write;
 
 pub use generate::{World, generate, view_name};
-pub use params::{Survey2Frame, SurveyOutput, SynthError, SynthOutput, SynthParams};
+pub use params::{Structure, Survey2Frame, SurveyOutput, SynthError, SynthOutput, SynthParams};

@@ -33,6 +33,30 @@ pub struct SynthParams {
     /// Which frame survey 2's COLMAP model is in.
     #[serde(default)]
     pub survey2_frame: Survey2Frame,
+    /// What is generated. Left out of the manifest for the building, so its files stay as they
+    /// were before bridges existed.
+    #[serde(default, skip_serializing_if = "Structure::is_building")]
+    pub structure: Structure,
+}
+
+/// The generated structure.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Structure {
+    /// The RC frame building (`floors`, `bays_x`, `bays_y`).
+    #[default]
+    Building,
+    /// A multi-span girder bridge of `spans` spans (`synth::bridge`); the building's floor and
+    /// bay counts are not used.
+    Bridge { spans: u32 },
+}
+
+impl Structure {
+    /// The most spans a bridge may have (a 20 m span each: 1.28 km).
+    pub const MAX_SPANS: u32 = 64;
+
+    pub fn is_building(&self) -> bool {
+        *self == Structure::Building
+    }
 }
 
 /// The frame of survey 2's COLMAP model.
@@ -93,6 +117,19 @@ impl SynthParams {
             sparse_points: 30_000,
             hfov_degrees: 65.0,
             survey2_frame: Survey2Frame::Same,
+            structure: Structure::Building,
+        }
+    }
+
+    /// The built-in bridge of `spans` 20 m spans (the CLI's default is 6): 360 + 120 views at
+    /// 960×540 (side strips at two heights on both sides and a strip under the deck).
+    pub fn bridge(out: impl Into<PathBuf>, spans: u32) -> SynthParams {
+        SynthParams {
+            views: 360,
+            views_survey2: 120,
+            sparse_points: 120_000,
+            structure: Structure::Bridge { spans },
+            ..SynthParams::demo(out)
         }
     }
 
@@ -118,6 +155,14 @@ impl SynthParams {
         }
         if !(self.hfov_degrees > 10.0 && self.hfov_degrees < 150.0) {
             return bad("the field of view must be between 10 and 150 degrees");
+        }
+        if let Structure::Bridge { spans } = self.structure
+            && !(1..=Structure::MAX_SPANS).contains(&spans)
+        {
+            return Err(SynthError::InvalidParams(format!(
+                "--spans must be between 1 and {}",
+                Structure::MAX_SPANS
+            )));
         }
         if self.survey2_frame == Survey2Frame::Joint && self.surveys < 2 {
             return bad("--survey2-frame joint needs --surveys 2");

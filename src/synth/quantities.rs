@@ -3,7 +3,6 @@
 //! surveys, measured on the surfaces that carry damage and classed as the masks are. No rendering.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::io::Write;
 use std::path::Path;
 
 use glam::{DVec3, Vec2, Vec3};
@@ -199,15 +198,7 @@ fn region_ids(state: &DamageState) -> BTreeSet<u32> {
 }
 
 pub fn write(path: &Path, quantities: &Quantities) -> Result<(), SynthError> {
-    let text = serde_json::to_string_pretty(quantities)
-        .map_err(|e| SynthError::InvalidParams(format!("{}: {e}", path.display())))?;
-    let io = |source: std::io::Error| SynthError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let mut f = std::fs::File::create(path).map_err(io)?;
-    f.write_all(text.as_bytes()).map_err(io)?;
-    f.write_all(b"\n").map_err(io)
+    super::write::json(path, quantities)
 }
 
 enum Job<'a> {

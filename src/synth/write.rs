@@ -124,6 +124,19 @@ pub struct DamageSummary {
     pub spalls_with_rebar: usize,
 }
 
+/// `value` as pretty JSON with a final newline.
+pub fn json(path: &Path, value: &impl Serialize) -> Result<(), SynthError> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| SynthError::InvalidParams(format!("{}: {e}", path.display())))?;
+    let io = |source: std::io::Error| SynthError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut f = File::create(path).map_err(io)?;
+    f.write_all(text.as_bytes()).map_err(io)?;
+    f.write_all(b"\n").map_err(io)
+}
+
 pub fn manifest(path: &Path, manifest: &Manifest) -> Result<(), SynthError> {
     let text = ron::ser::to_string_pretty(manifest, ron::ser::PrettyConfig::default())
         .map_err(|e| SynthError::InvalidParams(format!("{}: {e}", path.display())))?;
