@@ -10,45 +10,8 @@ use std::process::{Command, Output, Stdio};
 
 use damage_twin::blocks::plan::{PLAN_FILE, load_plan, save_plan};
 
-fn binary() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_damage-twin"))
-}
-
-fn run(mut command: Command) -> Output {
-    let output = command.output().expect("runs");
-    assert!(
-        output.status.success(),
-        "{command:?} failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    output
-}
-
-/// A tiny demo building (96×54, 16 views) and a 2-block plan of it in `root/plan`.
-fn tiny_plan(root: &Path, plan: &str) -> PathBuf {
-    let synth = root.join("synth");
-    if !synth.exists() {
-        let params = damage_twin::synth::SynthParams {
-            width: 96,
-            height: 54,
-            views: 16,
-            surveys: 1,
-            sparse_points: 1500,
-            ..damage_twin::synth::SynthParams::demo(synth.clone())
-        };
-        damage_twin::synth::generate(&params, &|_, _| {}).expect("synth");
-    }
-    let out = root.join(plan);
-    let mut partition = binary();
-    partition
-        .arg("partition")
-        .arg(synth.join("survey-1"))
-        .arg("--out")
-        .arg(&out)
-        .args(["--blocks", "2", "--iters", "80", "--seed", "5"]);
-    run(partition);
-    out
-}
+mod blocks_support;
+use blocks_support::{binary, run, tiny_plan};
 
 fn train_block(plan: &Path, k: usize) -> Command {
     let mut command = binary();

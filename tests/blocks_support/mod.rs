@@ -1,0 +1,47 @@
+//! Shared by the block tests (`tests/blocks.rs`, `tests/slurm_blocks.rs`): the binary, a run
+//! that must succeed, and a tiny demo building partitioned into two blocks.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+pub fn binary() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_damage-twin"))
+}
+
+pub fn run(mut command: Command) -> Output {
+    let output = command.output().expect("runs");
+    assert!(
+        output.status.success(),
+        "{command:?} failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output
+}
+
+/// A tiny demo building (96×54, 16 views) and a 2-block plan of it in `root/plan`.
+pub fn tiny_plan(root: &Path, plan: &str) -> PathBuf {
+    let synth = root.join("synth");
+    if !synth.exists() {
+        let params = damage_twin::synth::SynthParams {
+            width: 96,
+            height: 54,
+            views: 16,
+            surveys: 1,
+            sparse_points: 1500,
+            ..damage_twin::synth::SynthParams::demo(synth.clone())
+        };
+        damage_twin::synth::generate(&params, &|_, _| {}).expect("synth");
+    }
+    let out = root.join(plan);
+    let mut partition = binary();
+    partition
+        .arg("partition")
+        .arg(synth.join("survey-1"))
+        .arg("--out")
+        .arg(&out)
+        .args(["--blocks", "2", "--iters", "80", "--seed", "5"]);
+    run(partition);
+    out
+}
