@@ -120,6 +120,7 @@ pub struct StepReport {
 const APPEARANCE_RECENTRE_EVERY: u32 = 100;
 
 mod checkpoint;
+mod frozen_cache;
 mod resident;
 mod step_loss;
 mod trainer_inputs;
@@ -167,6 +168,8 @@ pub struct Trainer {
     resident: Option<resident::Resident>,
     /// The loss of the last GPU-resident step.
     last_loss: f32,
+    /// Which Gaussians the renderer may treat as frozen between steps (`frozen_cache.rs`).
+    frozen_cache: frozen_cache::FrozenCache,
 }
 
 impl Trainer {
@@ -282,7 +285,8 @@ impl Trainer {
         };
         let rng = fastrand::Rng::with_seed(spec.seed);
         let resident = resident::can_be_resident(&spec, &mut backend).then(resident::Resident::new);
-        Ok(Trainer {
+        let mut trainer = Trainer {
+            frozen_cache: frozen_cache::FrozenCache::default(),
             resident,
             last_loss: f32::NAN,
             regions,
@@ -318,7 +322,9 @@ impl Trainer {
             spec,
             splats,
             views,
-        })
+        };
+        trainer.refresh_trainable();
+        Ok(trainer)
     }
 
     /// Why the renderer stopped working, if it did (see `RasterBackend::fault`).
@@ -434,6 +440,8 @@ impl Trainer {
         let t = Instant::now();
         self.rasterizer
             .set_active_tiles(self.tiles[view_index].as_deref());
+        self.rasterizer
+            .set_focus(self.frozen_cache.focus(view_index));
         self.rasterizer.forward(
             &self.splats,
             &self.views[view_index].camera,
@@ -525,6 +533,10 @@ impl Trainer {
             changed = true;
         }
         self.timings.densify += t.elapsed().as_secs_f64();
+        if changed {
+            // Frozen Gaussians may have moved, been added or removed, or changed colour.
+            self.refresh_trainable();
+        }
 
         self.steps_done = step;
         if (changed || step - self.checkpoint_step >= CHECKPOINT_EVERY)
@@ -566,6 +578,7 @@ impl Trainer {
     pub fn evaluate(&mut self, views: &[TrainView]) -> EvalScores {
         self.sync();
         self.rasterizer.set_active_tiles(None);
+        self.rasterizer.set_focus(None);
         let settings = self.step_settings(self.steps_done.max(1));
         evaluate_with(
             self.rasterizer.as_mut(),
@@ -582,5 +595,6 @@ impl Trainer {
     pub fn poison_for_test(&mut self, gaussian: usize) {
         let k3 = self.splats.sh_coeffs() * 3;
         self.splats.sh[gaussian * k3] = f32::NAN;
+        self.frozen_cache.invalidate();
     }
 }
