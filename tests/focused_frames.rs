@@ -171,11 +171,11 @@ fn cached_frames_match_whole_frames_and_are_rebuilt_when_stale() {
         })
     };
     let check = |r: &mut Rasterizer,
-                     s: &Splats,
-                     cam: &Camera,
-                     f: Option<FrameFocus<'_>>,
-                     cached: bool,
-                     what: &str| {
+                 s: &Splats,
+                 cam: &Camera,
+                 f: Option<FrameFocus<'_>>,
+                 cached: bool,
+                 what: &str| {
         let trainable = f.map(|f| f.trainable.to_vec()).unwrap_or_default();
         let got = frame(r, s, cam, &active, f);
         assert_eq!(r.last_frame_cached(), cached, "{what}: cached or not");

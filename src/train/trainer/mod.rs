@@ -6,7 +6,6 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 use glam::Vec3;
-use serde::Serialize;
 
 use crate::raster::{
     PixelGrads, RasterBackend, Rasterizer, RenderOutput, RenderSettings, SplatGrads,
@@ -63,47 +62,6 @@ pub enum TrainError {
     RendererFault(String),
 }
 
-/// Seconds spent per stage, summed over steps.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct StageTimes {
-    /// Raster forward as a whole, and its parts when the rasterizer reports them.
-    pub forward: f64,
-    pub project: f64,
-    pub sort: f64,
-    pub rasterize: f64,
-    pub loss: f64,
-    /// Raster backward as a whole, and its two parts.
-    pub backward: f64,
-    pub rasterize_backward: f64,
-    pub project_backward: f64,
-    /// NaN/Inf checks and checkpoints.
-    pub checks: f64,
-    pub optimizer: f64,
-    pub densify: f64,
-    pub total: f64,
-}
-
-impl StageTimes {
-    /// Milliseconds per step of every stage.
-    pub fn per_step_ms(&self, steps: u32) -> StageTimes {
-        let k = 1000.0 / steps.max(1) as f64;
-        StageTimes {
-            forward: self.forward * k,
-            project: self.project * k,
-            sort: self.sort * k,
-            rasterize: self.rasterize * k,
-            loss: self.loss * k,
-            backward: self.backward * k,
-            rasterize_backward: self.rasterize_backward * k,
-            project_backward: self.project_backward * k,
-            checks: self.checks * k,
-            optimizer: self.optimizer * k,
-            densify: self.densify * k,
-            total: self.total * k,
-        }
-    }
-}
-
 /// What one step did.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StepReport {
@@ -121,6 +79,8 @@ const APPEARANCE_RECENTRE_EVERY: u32 = 100;
 
 mod checkpoint;
 mod frozen_cache;
+mod stage_times;
+pub use stage_times::StageTimes;
 mod resident;
 mod step_loss;
 mod trainer_inputs;
