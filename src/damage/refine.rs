@@ -65,6 +65,8 @@ pub struct RefineReport {
     pub stage_ms_per_step: crate::train::trainer::StageTimes,
     /// A full-image step of the same model at the same resolution, for comparison.
     pub ms_per_full_step: f64,
+    /// That full-image step by stage.
+    pub stage_ms_per_full_step: crate::train::trainer::StageTimes,
     pub before: Quality,
     pub after: Quality,
     pub views: Vec<ViewHulls>,
@@ -216,7 +218,7 @@ pub fn refine_from(
         spec.geometry_rate = Some(rates);
     }
     // A full-image step of the same run, for the cost comparison: a few steps on uncropped views.
-    let full_step_ms = full_step_ms(&focus, model, &spec, &trained, &targets, mode)?;
+    let (full_step_ms, full_stages) = full_step_ms(&focus, model, &spec, &trained, &targets, mode)?;
     let setup = TrainSetup {
         spec,
         splats: model.clone(),
@@ -261,6 +263,7 @@ pub fn refine_from(
         gaussians_after: refined.len(),
         ms_per_refine_step: outcome.timings.total * 1000.0 / outcome.steps.max(1) as f64,
         ms_per_full_step: full_step_ms,
+        stage_ms_per_full_step: full_stages,
         stage_ms_per_step: outcome.timings.per_step_ms(outcome.steps),
         before,
         after,

@@ -16,7 +16,7 @@ use crate::splats::Splats;
 use crate::train::focus::{Focus, ViewHulls};
 use crate::train::job::JobError;
 use crate::train::spec::{DensifyPolicy, TrainSpec, TrainView};
-use crate::train::trainer::Trainer;
+use crate::train::trainer::{StageTimes, Trainer};
 
 /// Damage and image quality on the held-out views at the refinement scale.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -31,7 +31,7 @@ pub struct Quality {
 }
 
 /// Milliseconds per step of the same run on uncropped views (up to four of the trained ones),
-/// made into targets by `targets` as the crops were.
+/// made into targets by `targets` as the crops were, in all and by stage.
 pub(super) fn full_step_ms(
     focus: &Focus,
     model: &Splats,
@@ -39,7 +39,7 @@ pub(super) fn full_step_ms(
     trained: &[&ViewHulls],
     targets: &(dyn Fn(&mut [TrainView]) + Sync),
     mode: TrainMode,
-) -> Result<f64, JobError> {
+) -> Result<(f64, StageTimes), JobError> {
     const STEPS: u32 = 8;
     let indices: Vec<usize> = trained.iter().take(4).map(|v| v.index).collect();
     let views = focus.load(&indices, mode.uses_masks(), targets)?;
@@ -51,11 +51,15 @@ pub(super) fn full_step_ms(
     let mut trainer = Trainer::new(timing_spec, model.clone(), views)?;
     // One warm-up step sizes the buffers.
     trainer.step();
+    let warm_up = trainer.timings().clone();
     let t = Instant::now();
     while !trainer.is_done() {
         trainer.step();
     }
-    Ok(t.elapsed().as_secs_f64() * 1000.0 / (STEPS - 1) as f64)
+    let ms = t.elapsed().as_secs_f64() * 1000.0 / (STEPS - 1) as f64;
+    let mut stages = trainer.timings().clone();
+    stages.subtract(&warm_up);
+    Ok((ms, stages.per_step_ms(STEPS - 1)))
 }
 
 /// Damage figures against the reference masks and PSNR (whole and outside the hulls) on the

@@ -40,6 +40,13 @@ pub trait RasterBackend: Send {
         let _ = tiles;
     }
 
+    /// The focus of the next frames of a focused run (None: plain frames); see
+    /// `Rasterizer::set_focus`. Rendering every frame whole is always correct, only slower, so
+    /// a backend may ignore this.
+    fn set_focus(&mut self, focus: Option<super::FrameFocus<'_>>) {
+        let _ = focus;
+    }
+
     /// Per Gaussian, the screen radius of the last forward (0: culled); density control
     /// reads it.
     fn radii(&self) -> &[u32];
@@ -88,6 +95,10 @@ impl RasterBackend for Rasterizer {
 
     fn set_active_tiles(&mut self, tiles: Option<&[bool]>) {
         Rasterizer::set_active_tiles(self, tiles);
+    }
+
+    fn set_focus(&mut self, focus: Option<super::FrameFocus<'_>>) {
+        Rasterizer::set_focus(self, focus);
     }
 
     fn radii(&self) -> &[u32] {

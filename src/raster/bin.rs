@@ -137,6 +137,9 @@ pub(crate) struct TileBins {
     /// Tile rectangle per Gaussian (indexed by Gaussian).
     rects: Vec<[u32; 4]>,
     cursor: Vec<u32>,
+    /// `build_merged`'s moving intersections per tile (ranges, then Gaussian indices).
+    moving_ranges: Vec<[u32; 2]>,
+    moving_ids: Vec<u32>,
     /// Per tile: rendered or not (None: every tile). Set by `Rasterizer::set_active_tiles`;
     /// applied only when it has one entry per tile of the frame.
     pub active: Option<Vec<bool>>,
@@ -255,6 +258,136 @@ impl TileBins {
             }
         }
     }
+}
+
+impl TileBins {
+    /// [`TileBins::build`] of a frame in which only `moving` (ascending Gaussian indices) were
+    /// projected: those are binned and sorted here, and merged per tile with `frozen`, the
+    /// other Gaussians' intersections as an earlier `build` of the same view sorted them (per
+    /// tile its range in `frozen.ids`, by depth then index). The merge keeps the (depth, index)
+    /// order, so the bins are those `build` makes of the whole frame.
+    pub fn build_merged(
+        &mut self,
+        projected: &Projected,
+        width: u32,
+        height: u32,
+        moving: &[u32],
+        frozen: FrozenTiles<'_>,
+    ) {
+        let (tiles_x, tiles_y) = tile_grid(width, height);
+        self.tiles_x = tiles_x;
+        self.tiles_y = tiles_y;
+        self.width = width;
+        self.height = height;
+        let tiles_x = tiles_x as usize;
+        let tiles = self.tile_count();
+        assert_eq!(
+            frozen.ranges.len(),
+            tiles,
+            "frozen tile lists of another grid"
+        );
+        let active = self.active.as_deref().filter(|a| a.len() == tiles);
+        self.rects.clear();
+        self.depth_keys.clear();
+        self.cursor.clear();
+        self.cursor.resize(tiles, 0);
+        // The moving Gaussians' rectangles (by position in `moving`), keys and counts.
+        for (j, &g) in moving.iter().enumerate() {
+            let g = g as usize;
+            let mut rect = tile_rect(
+                projected.means2d[g],
+                projected.radii[g],
+                projected.extents[g],
+                width,
+                height,
+            );
+            if rect[2] > rect[0] && active.is_some_and(|a| !rect_touches(&rect, a, tiles_x)) {
+                rect = [0; 4];
+            }
+            self.rects.push(rect);
+            if rect[2] > rect[0] {
+                let key = ((projected.depths[g].to_bits() as u64) << 32) | j as u64;
+                self.depth_keys.push(key);
+                for ty in rect[1] as usize..rect[3] as usize {
+                    for tx in rect[0] as usize..rect[2] as usize {
+                        let tile = ty * tiles_x + tx;
+                        if active.is_none_or(|a| a[tile]) {
+                            self.cursor[tile] += 1;
+                        }
+                    }
+                }
+            }
+        }
+        // Positions in `moving` ascend with the Gaussian index, so sorting by (depth,
+        // position) sorts by (depth, index).
+        radix_sort_by_depth(&mut self.depth_keys, &mut self.sort_scratch);
+        // The moving intersections per tile, sorted (`moving_ids`), then each tile's two
+        // sorted lists merged.
+        let mut moving_ranges = std::mem::take(&mut self.moving_ranges);
+        moving_ranges.clear();
+        let mut start = 0u32;
+        for count in self.cursor.iter_mut() {
+            moving_ranges.push([start, start + *count]);
+            *count = start;
+            start += moving_ranges.last().map_or(0, |r| r[1] - r[0]);
+        }
+        self.moving_ids.clear();
+        self.moving_ids.resize(start as usize, 0);
+        for key in &self.depth_keys {
+            let j = (*key & 0xffff_ffff) as usize;
+            let rect = self.rects[j];
+            for ty in rect[1] as usize..rect[3] as usize {
+                for tx in rect[0] as usize..rect[2] as usize {
+                    let tile = ty * tiles_x + tx;
+                    if active.is_none_or(|a| a[tile]) {
+                        let slot = &mut self.cursor[tile];
+                        self.moving_ids[*slot as usize] = moving[j];
+                        *slot += 1;
+                    }
+                }
+            }
+        }
+        self.tile_ranges.clear();
+        let mut start = 0u32;
+        for (m, f) in moving_ranges.iter().zip(frozen.ranges) {
+            let end = start + (m[1] - m[0]) + (f[1] - f[0]);
+            self.tile_ranges.push([start, end]);
+            start = end;
+        }
+        self.gaussian_ids.clear();
+        self.gaussian_ids.resize(start as usize, 0);
+        let key = |g: u32| ((projected.depths[g as usize].to_bits() as u64) << 32) | g as u64;
+        for ((out, m), f) in self
+            .tile_ranges
+            .iter()
+            .zip(&moving_ranges)
+            .zip(frozen.ranges)
+        {
+            let out = &mut self.gaussian_ids[out[0] as usize..out[1] as usize];
+            let a = &self.moving_ids[m[0] as usize..m[1] as usize];
+            let b = &frozen.ids[f[0] as usize..f[1] as usize];
+            let (mut i, mut k) = (0, 0);
+            for slot in out.iter_mut() {
+                let take_a = k == b.len() || (i < a.len() && key(a[i]) < key(b[k]));
+                if take_a {
+                    *slot = a[i];
+                    i += 1;
+                } else {
+                    *slot = b[k];
+                    k += 1;
+                }
+            }
+        }
+        self.moving_ranges = moving_ranges;
+    }
+}
+
+/// A view's frozen intersections for [`TileBins::build_merged`]: per tile its `[start, end)`
+/// range in `ids`, each range ordered by depth then index.
+#[derive(Clone, Copy, Debug)]
+pub struct FrozenTiles<'a> {
+    pub ranges: &'a [[u32; 2]],
+    pub ids: &'a [u32],
 }
 
 /// Whether the tile rectangle `[x0, y0, x1, y1]` holds an active tile.

@@ -8,6 +8,7 @@
 mod backend;
 mod bin;
 mod fast_exp;
+mod focused;
 mod forward;
 mod lane_math;
 mod lanes;
@@ -30,6 +31,7 @@ use crate::splats::Splats;
 
 pub use backend::RasterBackend;
 pub use bin::{tile_grid, tile_rect};
+pub use focused::FrameFocus;
 
 /// Tile edge in pixels (gsplat, 3DGS).
 pub const TILE_SIZE: u32 = 16;
@@ -267,6 +269,8 @@ pub struct Rasterizer {
     label_channels: usize,
     width: u32,
     height: u32,
+    /// Focused runs' per-view caches of the frozen Gaussians (`focused.rs`).
+    focus: focused::FocusState,
 }
 
 impl Rasterizer {
@@ -282,6 +286,20 @@ impl Rasterizer {
         settings: &RenderSettings,
         out: &mut RenderOutput,
     ) {
+        if self.forward_cached(splats, camera, settings, out).is_none() {
+            self.forward_whole(splats, camera, settings, out);
+        }
+    }
+
+    /// `forward` of every Gaussian, no cache.
+    fn forward_whole(
+        &mut self,
+        splats: &Splats,
+        camera: &Camera,
+        settings: &RenderSettings,
+        out: &mut RenderOutput,
+    ) {
+        self.focus.forget_written();
         let labels = splats.label_channels;
         assert!(
             labels <= MAX_LABEL_CHANNELS,
@@ -297,6 +315,21 @@ impl Rasterizer {
         let t1 = Instant::now();
         self.bins.build(&self.projected, frame.width, frame.height);
         let t2 = Instant::now();
+        self.rasterize_bins(settings, labels, &frame, out);
+        let t3 = Instant::now();
+        self.timings.project = t1 - t0;
+        self.timings.sort = t2 - t1;
+        self.timings.raster_forward = t3 - t2;
+    }
+
+    /// Blends the binned frame into `out` (the forward after binning).
+    fn rasterize_bins(
+        &mut self,
+        settings: &RenderSettings,
+        labels: usize,
+        frame: &CameraFrame,
+        out: &mut RenderOutput,
+    ) {
         forward::rasterize(
             &self.projected,
             &self.bins,
@@ -314,10 +347,6 @@ impl Rasterizer {
             frame.height,
             out,
         );
-        let t3 = Instant::now();
-        self.timings.project = t1 - t0;
-        self.timings.sort = t2 - t1;
-        self.timings.raster_forward = t3 - t2;
     }
 
     /// Renders only these tiles (`ty * tiles_x + tx`, one flag per tile of the next frames;
@@ -401,6 +430,10 @@ impl Rasterizer {
             grads.reset(splats);
         }
         let frame = CameraFrame::new(camera);
+        if self.focus.last_cached() {
+            self.backward_cached(splats, &frame, settings, v_out, grads);
+            return;
+        }
         let t0 = Instant::now();
         raster_backward::rasterize_backward(
             &self.projected,

@@ -395,6 +395,26 @@ pub(crate) fn unpack_screen_grads(
     labels: usize,
     screen: &mut ScreenGrads,
 ) {
+    unpack_rows(gauss_grads, 0..n, labels, screen);
+}
+
+/// [`unpack_screen_grads`] of the Gaussians `ids` only, in `ids` order.
+pub(crate) fn unpack_screen_grads_of(
+    gauss_grads: &[f32],
+    ids: &[u32],
+    labels: usize,
+    screen: &mut ScreenGrads,
+) {
+    unpack_rows(gauss_grads, ids.iter().map(|&g| g as usize), labels, screen);
+}
+
+/// The gradient rows `rows` into `screen`, in that order.
+fn unpack_rows(
+    gauss_grads: &[f32],
+    rows: impl Iterator<Item = usize>,
+    labels: usize,
+    screen: &mut ScreenGrads,
+) {
     let stride = grad_stride(labels);
     screen.v_means2d.clear();
     screen.v_conics.clear();
@@ -402,7 +422,7 @@ pub(crate) fn unpack_screen_grads(
     screen.v_opacities.clear();
     screen.v_depths.clear();
     screen.v_labels.clear();
-    for g in 0..n {
+    for g in rows {
         let r = &gauss_grads[g * stride..(g + 1) * stride];
         screen.v_means2d.push(Vec2::new(r[G_MEAN], r[G_MEAN + 1]));
         screen

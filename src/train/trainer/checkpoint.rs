@@ -50,6 +50,7 @@ impl Trainer {
             self.adam.clone_from(&self.checkpoint.adam);
             self.densifier.clone_from(&self.checkpoint.densifier);
             self.grads = SplatGrads::zeros(&self.splats);
+            self.refresh_trainable();
             reason.push_str(&format!(
                 "; model restored to step {}",
                 self.checkpoint_step

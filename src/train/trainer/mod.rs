@@ -6,7 +6,6 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 use glam::Vec3;
-use serde::Serialize;
 
 use crate::raster::{
     PixelGrads, RasterBackend, Rasterizer, RenderOutput, RenderSettings, SplatGrads,
@@ -63,47 +62,6 @@ pub enum TrainError {
     RendererFault(String),
 }
 
-/// Seconds spent per stage, summed over steps.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct StageTimes {
-    /// Raster forward as a whole, and its parts when the rasterizer reports them.
-    pub forward: f64,
-    pub project: f64,
-    pub sort: f64,
-    pub rasterize: f64,
-    pub loss: f64,
-    /// Raster backward as a whole, and its two parts.
-    pub backward: f64,
-    pub rasterize_backward: f64,
-    pub project_backward: f64,
-    /// NaN/Inf checks and checkpoints.
-    pub checks: f64,
-    pub optimizer: f64,
-    pub densify: f64,
-    pub total: f64,
-}
-
-impl StageTimes {
-    /// Milliseconds per step of every stage.
-    pub fn per_step_ms(&self, steps: u32) -> StageTimes {
-        let k = 1000.0 / steps.max(1) as f64;
-        StageTimes {
-            forward: self.forward * k,
-            project: self.project * k,
-            sort: self.sort * k,
-            rasterize: self.rasterize * k,
-            loss: self.loss * k,
-            backward: self.backward * k,
-            rasterize_backward: self.rasterize_backward * k,
-            project_backward: self.project_backward * k,
-            checks: self.checks * k,
-            optimizer: self.optimizer * k,
-            densify: self.densify * k,
-            total: self.total * k,
-        }
-    }
-}
-
 /// What one step did.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StepReport {
@@ -120,6 +78,9 @@ pub struct StepReport {
 const APPEARANCE_RECENTRE_EVERY: u32 = 100;
 
 mod checkpoint;
+mod frozen_cache;
+mod stage_times;
+pub use stage_times::StageTimes;
 mod resident;
 mod step_loss;
 mod trainer_inputs;
@@ -167,6 +128,8 @@ pub struct Trainer {
     resident: Option<resident::Resident>,
     /// The loss of the last GPU-resident step.
     last_loss: f32,
+    /// Which Gaussians the renderer may treat as frozen between steps (`frozen_cache.rs`).
+    frozen_cache: frozen_cache::FrozenCache,
 }
 
 impl Trainer {
@@ -282,7 +245,8 @@ impl Trainer {
         };
         let rng = fastrand::Rng::with_seed(spec.seed);
         let resident = resident::can_be_resident(&spec, &mut backend).then(resident::Resident::new);
-        Ok(Trainer {
+        let mut trainer = Trainer {
+            frozen_cache: frozen_cache::FrozenCache::default(),
             resident,
             last_loss: f32::NAN,
             regions,
@@ -318,7 +282,9 @@ impl Trainer {
             spec,
             splats,
             views,
-        })
+        };
+        trainer.refresh_trainable();
+        Ok(trainer)
     }
 
     /// Why the renderer stopped working, if it did (see `RasterBackend::fault`).
@@ -434,6 +400,8 @@ impl Trainer {
         let t = Instant::now();
         self.rasterizer
             .set_active_tiles(self.tiles[view_index].as_deref());
+        self.rasterizer
+            .set_focus(self.frozen_cache.focus(view_index));
         self.rasterizer.forward(
             &self.splats,
             &self.views[view_index].camera,
@@ -525,6 +493,10 @@ impl Trainer {
             changed = true;
         }
         self.timings.densify += t.elapsed().as_secs_f64();
+        if changed {
+            // Frozen Gaussians may have moved, been added or removed, or changed colour.
+            self.refresh_trainable();
+        }
 
         self.steps_done = step;
         if (changed || step - self.checkpoint_step >= CHECKPOINT_EVERY)
@@ -566,6 +538,7 @@ impl Trainer {
     pub fn evaluate(&mut self, views: &[TrainView]) -> EvalScores {
         self.sync();
         self.rasterizer.set_active_tiles(None);
+        self.rasterizer.set_focus(None);
         let settings = self.step_settings(self.steps_done.max(1));
         evaluate_with(
             self.rasterizer.as_mut(),
@@ -582,5 +555,6 @@ impl Trainer {
     pub fn poison_for_test(&mut self, gaussian: usize) {
         let k3 = self.splats.sh_coeffs() * 3;
         self.splats.sh[gaussian * k3] = f32::NAN;
+        self.frozen_cache.invalidate();
     }
 }
