@@ -1,8 +1,6 @@
 //! Shared by the block tests (`tests/blocks.rs`, `tests/slurm_blocks.rs`): the binary, a run
 //! that must succeed, and a tiny demo building partitioned into two blocks.
 
-#![allow(dead_code)]
-
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
