@@ -43,7 +43,7 @@ pub struct ModelArgs {
     #[arg(long, default_value_t = 16)]
     pub multiple: u32,
     /// A pixel is damage where its probability is at least this.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = damage_twin::segment::DEFAULT_THRESHOLD)]
     pub threshold: f32,
     /// The model's channel order: rgb or bgr.
     #[arg(long, default_value = "rgb")]

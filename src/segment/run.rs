@@ -36,6 +36,10 @@ pub fn dataset_photos(dataset: &Dataset) -> Vec<Photo> {
         .collect()
 }
 
+/// The probability at or above which a pixel is damage unless told otherwise (`--threshold`, the
+/// app's "Segment with…").
+pub const DEFAULT_THRESHOLD: f32 = 0.5;
+
 /// What segmentation writes and how it reads the model.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SegmentSettings {

@@ -106,15 +106,26 @@ pub fn add_new_survey(
 ) -> Result<Option<AddedSurvey>, TimelineError> {
     let mut views = None;
     if survey.dataset_must_open {
+        // Named as given (the project would name it relative to its folder).
+        if !survey.dataset.is_dir() {
+            let problem = match survey.dataset.exists() {
+                true => "is not a folder: a survey's dataset is a folder",
+                false => "does not exist: a survey's dataset is a folder",
+            };
+            return Err(TimelineError::Io {
+                path: survey.dataset.clone(),
+                message: problem.into(),
+            });
+        }
         // Checked on a copy as it would be added (name, date, registration), before any work.
         let mut check = twin.clone();
         check.add_placed_survey(&survey.name, &survey.date, &survey.dataset, survey.align)?;
         views = Some(check.open_survey_dataset(&survey.name)?.views.len());
     }
-    let written = match &survey.segment {
-        Some(with) => Some(WrittenMasks::before(&survey.dataset, &with.settings)),
-        None => None,
-    };
+    let written = survey
+        .segment
+        .as_ref()
+        .map(|with| WrittenMasks::before(&survey.dataset, &with.settings));
     let undo = |e: TimelineError| {
         if let Some(w) = &written {
             w.remove_new();

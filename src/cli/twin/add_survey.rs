@@ -65,7 +65,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The job is only cancelled by a client, and the CLI has none: an add that did not happen
     // is still said.
     let Some(added) = added else {
-        anyhow::bail!("adding survey {} was cancelled: nothing changed", args.survey);
+        anyhow::bail!(
+            "adding survey {} was cancelled: nothing changed",
+            args.survey
+        );
     };
     for line in added.lines() {
         println!("{line}");
