@@ -17,6 +17,10 @@ pub enum DialogKind {
     SaveProject,
     ExportPly,
     ExportPng,
+    /// A later survey's dataset folder, for "Add survey…".
+    SurveyDataset,
+    /// The ONNX model "Add survey…" segments the photos with.
+    SegmentModel,
 }
 
 /// What a click selects.
@@ -143,6 +147,18 @@ pub enum Command {
         iterations: u32,
     },
     CancelTimelineJob,
+    /// Open the "Add survey…" dialog for the open project.
+    OpenAddSurvey,
+    /// Replace the dialog's fields (the panel edits a copy and submits it).
+    EditAddSurvey(Box<crate::app::survey_form::AddSurveyForm>),
+    /// A folder chosen as the new survey's dataset (its name fills an empty survey name).
+    ChooseSurveyDataset(PathBuf),
+    /// A file chosen as the model the new survey's photos are segmented with.
+    ChooseSegmentModel(PathBuf),
+    /// Add the survey the dialog describes (segmented first when asked), on a worker; cancel
+    /// with `CancelTimelineJob`.
+    AddSurvey,
+    CloseAddSurvey,
     /// Snapping to a view shows its change map instead of its photo.
     ShowChangeMaps(bool),
     /// Undo or redo the last selection, visibility or damage-class edit.

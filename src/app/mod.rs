@@ -16,6 +16,7 @@ pub mod scene_frame;
 pub mod settings;
 pub mod splat_view;
 pub mod state;
+pub mod survey_form;
 pub mod tools;
 pub mod training;
 pub mod viewport;
@@ -27,8 +28,8 @@ use std::sync::Arc;
 use crate::app::commands::{Command, DialogKind};
 use crate::app::demo::DemoPreparation;
 use crate::app::panels::{
-    ChartsPanel, LogPanel, ProjectPanel, RegionsPanel, SelectionPanel, StatsPanel, TimelinePanel,
-    TrainingPanel, ViewPanel,
+    AddSurveyPanel, ChartsPanel, LogPanel, ProjectPanel, RegionsPanel, SelectionPanel, StatsPanel,
+    TimelinePanel, TrainingPanel, ViewPanel,
 };
 use crate::app::settings::Settings;
 use crate::app::state::AppState;
@@ -91,6 +92,7 @@ pub struct TwinApp {
     regions: RegionsPanel,
     charts: ChartsPanel,
     timeline: TimelinePanel,
+    add_survey: AddSurveyPanel,
     log: LogPanel,
     commands: Vec<Command>,
     demo: Option<DemoPreparation>,
@@ -120,6 +122,7 @@ impl TwinApp {
             regions: RegionsPanel,
             charts: ChartsPanel,
             timeline: TimelinePanel::default(),
+            add_survey: AddSurveyPanel,
             log: LogPanel,
             commands: Vec::new(),
             demo: None,
@@ -299,6 +302,7 @@ impl eframe::App for TwinApp {
                 .resizable(false)
                 .show(ui, |ui| self.timeline.ui(ui, state, commands));
         }
+        self.add_survey.ui(&ctx, state, commands);
         egui::CentralPanel::no_frame().show(ui, |ui| {
             // What the viewport drew with applies now, not after the next frame's panels: they
             // and the queued commands see the camera and size the picture shows.

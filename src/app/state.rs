@@ -22,6 +22,7 @@ use crate::splats::selection::{self, EditHistory};
 use crate::timeline::Twin;
 use crate::train::history::History;
 
+mod adding_survey;
 mod editing;
 mod picking;
 mod project_watch;
@@ -136,6 +137,8 @@ pub struct AppState {
     pub refine: Option<RefineSession>,
     /// The open project's surveys (a twin project, not a bare dataset or model).
     pub timeline: Option<TimelineView>,
+    /// The "Add survey…" dialog's fields while it is open.
+    pub add_survey: Option<crate::app::survey_form::AddSurveyForm>,
     /// Surface points of the distance measurement (zero, one or two).
     pub distance: Vec<glam::Vec3>,
     pub log: VecDeque<String>,
@@ -171,6 +174,7 @@ impl AppState {
             edits: EditHistory::default(),
             refine: None,
             timeline: None,
+            add_survey: None,
             distance: Vec::new(),
             log: VecDeque::new(),
             viewport_pixels: [960, 540],
@@ -311,6 +315,7 @@ impl AppState {
         if let Some(job) = self.timeline.take().and_then(|t| t.job) {
             job.cancel();
         }
+        self.add_survey = None;
         self.snap = None;
         self.regions = None;
         self.history.clear();
@@ -489,6 +494,12 @@ impl AppState {
                 iterations,
             } => self.update_twin(strategy, iterations),
             Command::CancelTimelineJob => self.cancel_timeline_job(),
+            Command::OpenAddSurvey => self.open_add_survey(),
+            Command::EditAddSurvey(form) => self.edit_add_survey(*form),
+            Command::ChooseSurveyDataset(folder) => self.choose_survey_dataset(folder),
+            Command::ChooseSegmentModel(file) => self.choose_segment_model(file),
+            Command::AddSurvey => self.start_add_survey(),
+            Command::CloseAddSurvey => self.add_survey = None,
             Command::ShowChangeMaps(on) => {
                 if let Some(t) = &mut self.timeline {
                     t.show_change_maps = on;

@@ -127,6 +127,15 @@ pub fn dialog(kind: DialogKind, start: Option<PathBuf>, results: Sender<WorkerRe
                 .set_file_name("model.ply")
                 .save_file()
                 .map(Command::ExportPly),
+            DialogKind::SurveyDataset => d
+                .set_title("The later survey's dataset folder")
+                .pick_folder()
+                .map(Command::ChooseSurveyDataset),
+            DialogKind::SegmentModel => d
+                .set_title("The ONNX model to segment the photos with")
+                .add_filter("ONNX model", &["onnx"])
+                .pick_file()
+                .map(Command::ChooseSegmentModel),
             DialogKind::ExportPng => d
                 .set_title("Export the current view")
                 .add_filter("PNG", &["png"])

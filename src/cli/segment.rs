@@ -12,7 +12,7 @@ use glam::Vec3;
 use damage_twin::scene::{DamageClass, ImageScale};
 use damage_twin::segment::{
     Activation, ChannelOrder, PhotoSettings, Preprocess, SegmentSettings, SegmentSummary, Tiling,
-    dataset_photos, masks_from_probabilities, segment_job,
+    dataset_photos, masks_from_probabilities, parse_channel_classes, segment_job,
 };
 
 use crate::cli::args::{JobArgs, drive, open_dataset, parse_background, parse_scale};
@@ -43,7 +43,7 @@ pub struct ModelArgs {
     #[arg(long, default_value_t = 16)]
     pub multiple: u32,
     /// A pixel is damage where its probability is at least this.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = damage_twin::segment::DEFAULT_THRESHOLD)]
     pub threshold: f32,
     /// The model's channel order: rgb or bgr.
     #[arg(long, default_value = "rgb")]
@@ -66,14 +66,7 @@ impl ModelArgs {
     /// The class of each output channel.
     pub fn channel_classes(&self) -> anyhow::Result<Vec<Option<DamageClass>>> {
         let list = self.classes.as_deref().unwrap_or(&self.class);
-        list.split(',')
-            .map(|entry| match entry.trim() {
-                "-" | "background" => Ok(None),
-                id => DamageClass::from_id(id).map(Some).with_context(|| {
-                    format!("unknown class {id:?}: use crack, spalling, rebar or - (not written)")
-                }),
-            })
-            .collect()
+        Ok(parse_channel_classes(list)?)
     }
 
     /// The settings of a run writing (or refusing to overwrite, unless `overwrite`) masks.
@@ -165,20 +158,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// The run in one line per fact: photos, speed, damage share per class.
 pub fn print_summary(summary: &SegmentSummary, threads: usize, root: &std::path::Path) {
-    println!(
-        "segmented {} photos ({:.1} megapixels) in {:.1} s on {threads} threads: {:.2} images/s, \
-         {:.2} s per megapixel",
-        summary.photos,
-        summary.megapixels,
-        summary.seconds,
-        summary.photos_per_second(),
-        summary.seconds_per_megapixel()
-    );
-    for (class, share) in &summary.damage_fraction {
-        println!(
-            "  {class}: {:.2} % of pixels marked -> {}",
-            100.0 * share,
-            root.join("masks").join(class).display()
-        );
+    for line in summary.lines(threads, root) {
+        println!("{line}");
     }
 }

@@ -19,7 +19,7 @@ pub use model::SegmentModel;
 pub use photo::{PhotoSettings, ProbabilityMap, photo_probabilities};
 pub use preprocess::{Activation, ChannelOrder, Preprocess};
 pub use run::{
-    Photo, SegmentSettings, SegmentSummary, dataset_photos, masks_from_probabilities, segment_job,
-    segment_photos,
+    DEFAULT_THRESHOLD, Photo, SegmentSettings, SegmentSummary, dataset_photos,
+    masks_from_probabilities, parse_channel_classes, segment_job, segment_photos,
 };
 pub use tiles::Tiling;

@@ -36,6 +36,10 @@ pub fn dataset_photos(dataset: &Dataset) -> Vec<Photo> {
         .collect()
 }
 
+/// The probability at or above which a pixel is damage unless told otherwise (`--threshold`, the
+/// app's "Segment with…").
+pub const DEFAULT_THRESHOLD: f32 = 0.5;
+
 /// What segmentation writes and how it reads the model.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SegmentSettings {
@@ -51,7 +55,44 @@ pub struct SegmentSettings {
     pub background: [f32; 3],
 }
 
+/// The class of each output channel from a comma-separated list (`crack`, `-,crack,spalling`):
+/// a class id, or `-` (or `background`) for a channel not written. `twin add-survey --segment`,
+/// `segment` and the app's "Segment with…" read the list the same way.
+pub fn parse_channel_classes(list: &str) -> Result<Vec<Option<DamageClass>>, SegmentError> {
+    list.split(',')
+        .map(|entry| match entry.trim() {
+            "-" | "background" => Ok(None),
+            id => DamageClass::from_id(id).map(Some).ok_or_else(|| {
+                SegmentError::Settings(format!(
+                    "unknown class {id:?}: use crack, spalling, rebar or - (not written)"
+                ))
+            }),
+        })
+        .collect()
+}
+
 impl SegmentSettings {
+    /// A run with the shared crack model's preprocessing and tiling at the photos' own scale
+    /// (`Preprocess::default`, `Tiling::default`), never overwriting: what the app's "Segment
+    /// with…" runs when only the classes and the threshold are chosen.
+    pub fn with_defaults(
+        classes: Vec<Option<DamageClass>>,
+        threshold: f32,
+        background: [f32; 3],
+    ) -> SegmentSettings {
+        SegmentSettings {
+            classes,
+            photo: PhotoSettings {
+                preprocess: crate::segment::Preprocess::default(),
+                scale: crate::scene::ImageScale::Factor(1),
+                tiling: crate::segment::Tiling::default(),
+            },
+            threshold,
+            overwrite: false,
+            background,
+        }
+    }
+
     /// The classes written, in channel order.
     pub fn written_classes(&self) -> Vec<DamageClass> {
         self.classes.iter().flatten().copied().collect()
@@ -103,6 +144,28 @@ impl SegmentSummary {
             .damage_fraction
             .entry(class.id().to_string())
             .or_insert(0.0) += marked as f64;
+    }
+
+    /// The run in one line per fact, as the CLI prints it and the app logs it: photos, speed on
+    /// `threads` threads, the damage share per class and where its masks went under `root`.
+    pub fn lines(&self, threads: usize, root: &Path) -> Vec<String> {
+        let mut lines = vec![format!(
+            "segmented {} photos ({:.1} megapixels) in {:.1} s on {threads} threads: {:.2} \
+             images/s, {:.2} s per megapixel",
+            self.photos,
+            self.megapixels,
+            self.seconds,
+            self.photos_per_second(),
+            self.seconds_per_megapixel()
+        )];
+        for (class, share) in &self.damage_fraction {
+            lines.push(format!(
+                "  {class}: {:.2} % of pixels marked -> {}",
+                100.0 * share,
+                root.join("masks").join(class).display()
+            ));
+        }
+        lines
     }
 
     /// Marked pixel counts become shares of the `pixels` looked at.

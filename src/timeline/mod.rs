@@ -4,6 +4,7 @@
 //! survey's model is never overwritten. Uses `scene` for the file format, `train`/`damage` for
 //! the work; must not contain UI.
 
+pub mod add_survey;
 pub mod align;
 pub mod appearance;
 pub mod changes;

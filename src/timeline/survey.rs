@@ -24,6 +24,19 @@ pub enum AlignMode {
     Joint,
 }
 
+impl AlignMode {
+    /// Every alignment, in the order the app offers them.
+    pub const ALL: [AlignMode; 2] = [AlignMode::SameFrame, AlignMode::Joint];
+
+    /// The name `--align` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            AlignMode::SameFrame => "same-frame",
+            AlignMode::Joint => "joint",
+        }
+    }
+}
+
 impl std::str::FromStr for AlignMode {
     type Err = String;
 

@@ -2,6 +2,7 @@
 //! method that reads the state and queues commands (rerun style). Panels never change the state
 //! directly and never talk to each other.
 
+pub mod add_survey;
 pub mod charts;
 pub mod log;
 pub mod project;
@@ -12,6 +13,7 @@ pub mod timeline;
 pub mod training;
 pub mod view;
 
+pub use add_survey::AddSurveyPanel;
 pub use charts::ChartsPanel;
 pub use log::LogPanel;
 pub use project::ProjectPanel;

@@ -1,7 +1,8 @@
 //! The timeline strip of a twin project: its surveys by date (click one, or < >, to show the
 //! twin as of that survey), a survey to compare with side by side or by swipe, damage coloured
 //! by survey, the change maps, and the timeline's jobs (detect changes, update the twin) with
-//! their progress. Reads the state, queues commands.
+//! their progress, and "Add survey…" (its dialog is `add_survey`). Reads the state, queues
+//! commands.
 
 use crate::app::commands::Command;
 use crate::app::panels::edit_settings;
@@ -51,6 +52,17 @@ impl TimelinePanel {
     /// Detect changes, and update the twin with its strategy and steps (both for a survey after
     /// the first).
     fn job_buttons(&mut self, ui: &mut egui::Ui, current: usize, commands: &mut Vec<Command>) {
+        if ui
+            .button("Add survey…")
+            .on_hover_text(
+                "A later survey's dataset, placed in the twin's frame (its photos segmented \
+                 first, when asked)",
+            )
+            .clicked()
+        {
+            commands.push(Command::OpenAddSurvey);
+        }
+        ui.separator();
         let later = current > 0;
         if ui
             .add_enabled(later, egui::Button::new("Detect changes"))

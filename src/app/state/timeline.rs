@@ -19,6 +19,7 @@ use crate::damage::refine::Strategy;
 use crate::scene::Dataset;
 use crate::splats::Splats;
 use crate::timeline::Twin;
+use crate::timeline::add_survey::AddedSurvey;
 use crate::timeline::detect_survey::{
     ChangeSummary, DetectOptions, change_map_path, compared_survey, detect_job,
 };
@@ -41,6 +42,8 @@ pub struct LoadedSurvey {
 pub enum TimelineWork {
     Detect(Job<(Twin, ChangeSummary)>),
     Update(Job<(Twin, UpdateOutcome)>),
+    /// "Add survey…" (`adding_survey`); `survey` is the index it will take.
+    AddSurvey(Job<(Twin, Option<AddedSurvey>)>),
 }
 
 pub struct TimelineJob {
@@ -58,6 +61,7 @@ impl TimelineJob {
         match &self.work {
             TimelineWork::Detect(j) => j.cancel(),
             TimelineWork::Update(j) => j.cancel(),
+            TimelineWork::AddSurvey(j) => j.cancel(),
         }
     }
 
@@ -65,6 +69,7 @@ impl TimelineJob {
         match self.work {
             TimelineWork::Detect(_) => "detecting changes",
             TimelineWork::Update(_) => "updating the twin",
+            TimelineWork::AddSurvey(_) => "adding the survey",
         }
     }
 }
@@ -292,7 +297,7 @@ impl AppState {
         }
     }
 
-    fn timeline_job_refused(&mut self) -> bool {
+    pub(super) fn timeline_job_refused(&mut self) -> bool {
         let busy = self.training.as_ref().is_some_and(|t| t.is_running()) || self.refine.is_some();
         let running = self.timeline.as_ref().is_some_and(|t| t.job.is_some());
         if busy || running {
@@ -415,6 +420,10 @@ impl AppState {
                     .events()
                     .try_recv()
                     .map(|e| e.map(|r| Done::Update(Box::new(r)))),
+                TimelineWork::AddSurvey(j) => j
+                    .events()
+                    .try_recv()
+                    .map(|e| e.map(|r| Done::AddSurvey(Box::new(r)))),
             };
             let event = match event {
                 Ok(event) => event,
@@ -432,7 +441,10 @@ impl AppState {
                         .record_progress(&p, job.started.elapsed().as_secs_f64());
                     job.progress = Some(p);
                 }
-                JobEvent::Log(line) => self.log_line(format!("update: {line}")),
+                JobEvent::Log(line) => {
+                    let name = job.name();
+                    self.log_line(format!("{name}: {line}"));
+                }
                 JobEvent::NanRolledBack { step, reason } => {
                     self.log_line(format!("update: step {step} rolled back ({reason})"));
                 }
@@ -446,9 +458,14 @@ impl AppState {
                     self.finish_timeline_job(survey, done);
                 }
                 JobEvent::Failed(error) => {
+                    let adding = matches!(job.work, TimelineWork::AddSurvey(_));
                     self.end_timeline_job();
                     self.log_line(format!("failed: {error}"));
-                    self.restore_shown_survey(survey);
+                    if adding {
+                        self.add_survey_failed(error.to_string());
+                    } else {
+                        self.restore_shown_survey(survey);
+                    }
                 }
             }
         }
@@ -476,6 +493,7 @@ impl AppState {
     /// history, `update_project_job`).
     fn finish_timeline_job(&mut self, survey: usize, done: Done) {
         match done {
+            Done::AddSurvey(done) => self.finish_add_survey(*done),
             Done::Detect(done) => {
                 let (twin, summary) = *done;
                 let figures = summary
@@ -537,6 +555,7 @@ impl AppState {
 pub(super) enum Done {
     Detect(Box<(Twin, ChangeSummary)>),
     Update(Box<(Twin, UpdateOutcome)>),
+    AddSurvey(Box<(Twin, Option<AddedSurvey>)>),
 }
 
 /// A `JobEvent` of one result type mapped to another.

@@ -2,21 +2,16 @@
 //! [--align same-frame|joint] [--segment MODEL.onnx]`: a later survey placed in the twin's frame;
 //! `joint` reports the registration's residual. With `--segment` the survey may arrive as photos
 //! alone: its photos are segmented first and the masks written into its dataset
-//! (`timeline::segment_survey`), then it is added.
+//! (`timeline::segment_survey`), then it is added. The work is `timeline::add_survey`'s, the
+//! app's "Add survey…" runs the same job.
 
 use std::path::PathBuf;
-use std::time::Duration;
 
-use anyhow::Context;
-use indicatif::{ProgressBar, ProgressStyle};
-
-use damage_twin::segment::SegmentModel;
-use damage_twin::timeline::Twin;
-use damage_twin::timeline::segment_survey::NewSurvey;
+use damage_twin::timeline::add_survey::{SegmentWith, SurveyToAdd, add_survey_job};
 use damage_twin::timeline::survey::AlignMode;
 
-use crate::cli::args::{JobArgs, LockArgs, parse_survey_name};
-use crate::cli::segment::{ModelArgs, print_summary};
+use crate::cli::args::{JobArgs, LockArgs, drive, parse_survey_name};
+use crate::cli::segment::ModelArgs;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -46,74 +41,37 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut twin = super::open_to_write(&args.dir, &args.lock, "twin add-survey")?;
-    if let Some(model) = &args.segment {
-        segment_survey(&twin, &args, model)?;
-    }
-    // Added to the project as it is when the lock is held: another survey added meanwhile stays.
-    let registration = twin.commit(|twin| {
-        twin.add_placed_survey(&args.survey, &args.date, &args.dataset, args.align)
-    })?;
-    match registration {
-        Some(r) => println!(
-            "added survey {} ({} views), registered through {} shared images ({} kept): residual \
-             {:.4} units RMS ({:.3} % of the cameras' spread), scale {:.4}",
-            args.survey,
-            twin.survey(&args.survey)?
-                .views
-                .as_ref()
-                .map_or(0, Vec::len),
-            r.shared,
-            r.inliers,
-            r.residual,
-            100.0 * r.relative_residual,
-            r.similarity.scale
-        ),
-        None => println!("added survey {} (same frame)", args.survey),
-    }
-    Ok(())
-}
-
-/// The survey's photos through `model_path` into its dataset's masks, with a progress bar.
-fn segment_survey(twin: &Twin, args: &Args, model_path: &std::path::Path) -> anyhow::Result<()> {
-    let settings = args
-        .model
-        .settings(false, twin.project.settings.background)?;
-    let model = SegmentModel::open(model_path, settings.classes.len())?;
-    let bar = if args.job.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(0)
+    let twin = super::open_to_write(&args.dir, &args.lock, "twin add-survey")?;
+    let segment = match args.segment {
+        Some(model) => Some(SegmentWith {
+            model,
+            settings: args
+                .model
+                .settings(false, twin.project.settings.background)?,
+        }),
+        None => None,
     };
-    bar.set_style(
-        ProgressStyle::with_template("{msg:>10} {bar:30} {pos}/{len} photos ETA {eta}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    bar.set_message("segment");
-    bar.enable_steady_tick(Duration::from_millis(250));
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.job.threads.unwrap_or(0))
-        .build()
-        .context("the worker threads")?;
-    let summary = pool.install(|| {
-        twin.segment_new_survey(
-            NewSurvey {
-                name: &args.survey,
-                date: &args.date,
-                dataset: &args.dataset,
-                align: args.align,
-            },
-            &model,
-            &settings,
-            &mut |done, total| {
-                bar.set_length(total as u64);
-                bar.set_position(done as u64);
-                true
-            },
-        )
-    });
-    bar.finish_and_clear();
-    let summary = summary.with_context(|| format!("segmenting survey {}", args.survey))?;
-    print_summary(&summary, pool.current_num_threads(), &args.dataset);
+    let survey = SurveyToAdd {
+        name: args.survey.clone(),
+        date: args.date,
+        dataset: args.dataset,
+        align: args.align,
+        segment,
+        dataset_must_open: false,
+    };
+    let job = add_survey_job(twin, survey, args.job.options());
+    let what = format!("adding survey {}", args.survey);
+    let (_, added) = drive(job, &what, args.job.quiet, |_| {})?;
+    // The job is only cancelled by a client, and the CLI has none: an add that did not happen
+    // is still said.
+    let Some(added) = added else {
+        anyhow::bail!(
+            "adding survey {} was cancelled: nothing changed",
+            args.survey
+        );
+    };
+    for line in added.lines() {
+        println!("{line}");
+    }
     Ok(())
 }

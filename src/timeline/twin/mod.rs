@@ -420,12 +420,7 @@ impl Twin {
                     .map(|n| survey_name_from(&n.to_string_lossy()))
                     .unwrap_or_else(|| "survey".into());
                 let name = self.unused_name(&base);
-                let mut date = today();
-                if let Some(latest) = self.project.surveys.last()
-                    && latest.date > date
-                {
-                    date = latest.date.clone();
-                }
+                let date = self.next_survey_date();
                 let stored = dataset.map(|d| self.relative(d)).unwrap_or_default();
                 self.project
                     .add_survey(Survey {
@@ -445,6 +440,16 @@ impl Twin {
         };
         self.save_model(&name, splats)?;
         Ok(name)
+    }
+
+    /// The date a survey added now takes unless told: today, or the latest survey's date when
+    /// that is later (a survey is never dated before the latest).
+    pub fn next_survey_date(&self) -> String {
+        let today = today();
+        match self.project.surveys.last() {
+            Some(latest) if latest.date > today => latest.date.clone(),
+            _ => today,
+        }
     }
 
     /// A survey name not yet used (compared without case): `base`, else `base-2`, `base-3`, …
