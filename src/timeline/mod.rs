@@ -14,6 +14,7 @@ pub mod lock;
 pub mod project_paths;
 pub mod quantities;
 pub mod record;
+pub mod register_survey;
 pub mod seed;
 pub mod segment_survey;
 pub mod survey;
