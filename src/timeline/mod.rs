@@ -10,6 +10,7 @@ pub mod changes;
 pub mod components;
 pub mod detect_survey;
 pub mod earlier;
+pub mod georeference;
 pub mod lock;
 pub mod project_paths;
 pub mod quantities;
