@@ -8,10 +8,13 @@ use glam::{Quat, Vec3};
 
 use damage_twin::damage::DamageClass;
 use damage_twin::damage::measure::{MeasureConfig, measure_damage};
+use damage_twin::report::georeference::ReportGeoreference;
 use damage_twin::report::inspection::{InspectionReport, ReportSettings, report_html};
 use damage_twin::report::project_runs::project_runs;
+use damage_twin::scene::sfm::GeorefSource;
 use damage_twin::scene::{Camera, Intrinsics};
 use damage_twin::splats::Splats;
+use damage_twin::timeline::georeference::GeodeticPosition;
 use damage_twin::timeline::quantities::{ReportRegion, SurveyQuantities, Totals};
 
 const ON: f32 = 6.0;
@@ -153,6 +156,12 @@ fn report_json_follows_its_documented_schema() {
             class: r.class,
             centroid_m: r.centroid,
             height_m: r.centroid[2],
+            // One region georeferenced, one not (a local control-point frame has no latitude).
+            geodetic: (i == 0).then_some(GeodeticPosition {
+                latitude: 55.698,
+                longitude: 13.195,
+                height_m: 41.5,
+            }),
             component: Some("wall".into()),
             length_m: r.length,
             width_m: r.width,
@@ -198,6 +207,39 @@ fn report_json_follows_its_documented_schema() {
             .unwrap(),
         ),
     );
+    let georeference = ReportGeoreference {
+        survey: "s1".into(),
+        source: GeorefSource::Gps,
+        latitude: 55.698,
+        longitude: 13.195,
+        altitude: 37.0,
+        metres_per_unit: 13.6,
+        rms_m: 4.26,
+        baseline_m: 52.2,
+        positions: 26,
+        scale_uncertainty: 0.016,
+        trust: "the scale is good to ±1.6 %".into(),
+    };
+    let registration = serde_json::from_value(serde_json::json!({
+        "reference_survey": "s0",
+        "registration": {
+            "engine": "COLMAP 3.8", "reference": "/data/s0", "photos": 2,
+            "registered": ["d.jpg"], "unregistered": ["e.jpg"], "seconds": 60.0,
+            "warnings": [],
+            "residual": {
+                "old_images": 3, "old_rotation_change_median_deg": 0.0,
+                "old_rotation_change_max_deg": 0.0, "old_position_change_median": 0.0,
+                "old_position_change_max": 0.0, "old_camera_spread": 2.0,
+                "old_focal_change_relative": 0.001, "new_reprojection_error_px": 0.61,
+                "new_points": 120
+            }
+        }
+    }))
+    .unwrap();
+    let report = report.with_placement(
+        Some(georeference),
+        BTreeMap::from([("s1".to_string(), registration)]),
+    );
     let json = serde_json::to_value(&report).unwrap();
     let schema_text = std::fs::read_to_string(
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/report.schema.json"),
@@ -227,6 +269,19 @@ fn report_json_follows_its_documented_schema() {
         "{html}"
     );
     assert_eq!(json["runs"][0]["step"], "trained");
+    // Per region its latitude, longitude and height; the georeference's trust and the survey's
+    // registration residual in words.
+    assert!(
+        html.contains("<td>55.6980000°, 13.1950000°, 41.5 m</td>"),
+        "{html}"
+    );
+    assert!(html.contains("the scale is good to ±1.6 %"), "{html}");
+    assert!(
+        html.contains("new photos&#39; points 0.61 px")
+            || html.contains("new photos' points 0.61 px"),
+        "{html}"
+    );
+    assert!(json["surveys"][0]["regions"][1]["geodetic"].is_null());
 }
 
 /// The subset of JSON Schema the documented schema uses: type (one or a list), required,

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use damage_twin::scene::sfm::{self, Matching, PoseOptions, Stage};
+use damage_twin::scene::sfm::{self, Matching, PoseOptions, Progress, Stage};
 use indicatif::{ProgressBar, ProgressStyle};
 
 #[derive(clap::Args, Debug)]
@@ -50,15 +50,9 @@ fn parse_matching(text: &str) -> Result<Matching, String> {
     }
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
-    let options = PoseOptions {
-        matching: args.matching,
-        threads: args.threads.unwrap_or(PoseOptions::default().threads),
-        max_features: args.max_features,
-        sequential_overlap: args.overlap,
-        control_points: args.control_points.clone(),
-    };
-    let bar = if args.quiet {
+/// A progress bar for a COLMAP run (hidden when `quiet`), moved by `show`.
+pub fn colmap_bar(quiet: bool) -> anyhow::Result<ProgressBar> {
+    let bar = if quiet {
         ProgressBar::hidden()
     } else {
         ProgressBar::new(0)
@@ -68,16 +62,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .context("progress bar template")?
             .progress_chars("=> "),
     );
-    let summary = sfm::pose_photos(&args.photos, &args.out, &options, &|p| {
-        if bar.message() != p.stage.label() {
-            bar.set_message(p.stage.label());
-        }
-        bar.set_length(p.total as u64);
-        bar.set_position(p.done as u64);
-        if p.stage == Stage::Write {
-            bar.set_position(0);
-        }
-    });
+    Ok(bar)
+}
+
+/// COLMAP's progress `p` on `bar`.
+pub fn show(bar: &ProgressBar, p: Progress) {
+    if bar.message() != p.stage.label() {
+        bar.set_message(p.stage.label());
+    }
+    bar.set_length(p.total as u64);
+    bar.set_position(p.done as u64);
+    if p.stage == Stage::Write {
+        bar.set_position(0);
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let options = PoseOptions {
+        matching: args.matching,
+        threads: args.threads.unwrap_or(PoseOptions::default().threads),
+        max_features: args.max_features,
+        sequential_overlap: args.overlap,
+        control_points: args.control_points.clone(),
+    };
+    let bar = colmap_bar(args.quiet)?;
+    let summary = sfm::pose_photos(&args.photos, &args.out, &options, &|p| show(&bar, p));
     bar.finish_and_clear();
     let summary = summary?;
     println!(

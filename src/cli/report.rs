@@ -10,6 +10,7 @@ use anyhow::Context;
 use damage_twin::damage::display::{DisplayStyle, png_bytes, render_view};
 use damage_twin::damage::layer::{EARLIER_DAMAGE, display_by_survey};
 use damage_twin::damage::measure::MeasureConfig;
+use damage_twin::report::georeference::ReportGeoreference;
 use damage_twin::report::inspection::{
     Figure, InspectionReport, ReportSettings, TruthTotals, report_html,
 };
@@ -191,6 +192,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         surveys,
         truth,
         runs,
+    );
+    let mut registrations = BTreeMap::new();
+    for survey in &twin.project.surveys {
+        if let Some(record) = twin.load_registration(&survey.name)? {
+            registrations.insert(survey.name.clone(), record);
+        }
+    }
+    let report = report.with_placement(
+        twin.georeference()?.as_ref().map(ReportGeoreference::of),
+        registrations,
     );
     let json = serde_json::to_string_pretty(&report)?;
     let json_path = args.out.join("report.json");

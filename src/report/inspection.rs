@@ -7,8 +7,10 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
+use crate::report::georeference::{ReportGeoreference, placement_html};
 use crate::report::project_runs::ProjectRun;
 use crate::timeline::quantities::{ReportRegion, SurveyQuantities};
+use crate::timeline::register_survey::SurveyRegistration;
 
 /// `report.json`'s `schema` value; bumped when a field changes meaning or goes.
 pub const REPORT_SCHEMA: &str = "damage-twin-report/1";
@@ -53,6 +55,10 @@ pub struct InspectionReport {
     pub truth: BTreeMap<String, TruthTotals>,
     /// What made each survey's model: wall time and held-out scores (`report::project_runs`).
     pub runs: Vec<ProjectRun>,
+    /// Where the twin is on the earth, when a survey's dataset is georeferenced.
+    pub georeference: Option<ReportGeoreference>,
+    /// Survey name → its registration by COLMAP into an earlier survey's model.
+    pub registrations: BTreeMap<String, SurveyRegistration>,
 }
 
 impl InspectionReport {
@@ -86,6 +92,21 @@ impl InspectionReport {
             surveys,
             truth,
             runs,
+            georeference: None,
+            registrations: BTreeMap::new(),
+        }
+    }
+
+    /// The report with the twin's georeference and its surveys' registrations.
+    pub fn with_placement(
+        self,
+        georeference: Option<ReportGeoreference>,
+        registrations: BTreeMap<String, SurveyRegistration>,
+    ) -> InspectionReport {
+        InspectionReport {
+            georeference,
+            registrations,
+            ..self
         }
     }
 }
@@ -206,6 +227,10 @@ pub fn report_html(report: &InspectionReport, figures: &[Figure], charts: &[Figu
         }
         h.push_str("</table>");
     }
+    h.push_str(&placement_html(
+        report.georeference.as_ref(),
+        &report.registrations,
+    ));
     h.push_str(&growth_chart(report));
     if !figures.is_empty() {
         h.push_str("<h2>The twin</h2><p>Damage coloured by class (crack red, spalling pink, rebar yellow) and by the survey it was first seen in.</p><div class=\"figs\">");
@@ -286,10 +311,16 @@ fn runs_section(report: &InspectionReport, charts: &[Figure]) -> String {
 }
 
 fn regions_table(regions: &[ReportRegion], unit: &str) -> String {
+    let geodetic = regions.iter().any(|r| r.geodetic.is_some());
     let mut h = format!(
-        "<table><tr><th class=\"l\">Region</th><th class=\"l\">Class</th><th>Centroid x, y, z ({unit})</th><th class=\"l\">Component</th>\
+        "<table><tr><th class=\"l\">Region</th><th class=\"l\">Class</th><th>Centroid x, y, z ({unit})</th>{}<th class=\"l\">Component</th>\
          <th>Length</th><th>Mean width</th><th>Area ({unit}²)</th><th class=\"l\">First seen</th>\
-         <th>Growth</th><th class=\"l\">Previous</th></tr>"
+         <th>Growth</th><th class=\"l\">Previous</th></tr>",
+        if geodetic {
+            "<th>Latitude, longitude, height</th>"
+        } else {
+            ""
+        }
     );
     let opt = |v: Option<f64>, k: f64, d: usize| {
         v.map_or("–".to_string(), |v| format!("{:.*}", d, v * k))
@@ -302,13 +333,21 @@ fn regions_table(regions: &[ReportRegion], unit: &str) -> String {
         };
         let _ = write!(
             h,
-            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{:.2}, {:.2}, {:.2}</td><td class=\"l\">{}</td><td>{}</td>\
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{:.2}, {:.2}, {:.2}</td>{}<td class=\"l\">{}</td><td>{}</td>\
              <td>{}</td><td>{:.3}</td><td class=\"l\">{}</td><td>{}</td><td class=\"l\">{}</td></tr>",
             escape(&r.id),
             r.class.id(),
             r.centroid_m[0],
             r.centroid_m[1],
             r.centroid_m[2],
+            match (geodetic, &r.geodetic) {
+                (false, _) => String::new(),
+                (true, None) => "<td>–</td>".into(),
+                (true, Some(p)) => format!(
+                    "<td>{:.7}°, {:.7}°, {:.1} m</td>",
+                    p.latitude, p.longitude, p.height_m
+                ),
+            },
             escape(r.component.as_deref().unwrap_or("–")),
             opt(r.length_m, 1.0, 2),
             r.width_m.map_or("–".to_string(), |w| {
@@ -370,7 +409,7 @@ fn growth_chart(report: &InspectionReport) -> String {
     h
 }
 
-fn escape(text: &str) -> String {
+pub(crate) fn escape(text: &str) -> String {
     text.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")

@@ -2,6 +2,7 @@
 //! arrives computed; nothing here renders a model or trains.
 
 pub mod chart_range;
+pub mod georeference;
 pub mod inspection;
 pub mod project_runs;
 pub mod tradeoff_chart;

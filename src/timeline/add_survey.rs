@@ -67,6 +67,8 @@ pub struct AddedSurvey {
     /// opened because it had to).
     pub views: Option<usize>,
     pub registration: Option<Registration>,
+    /// How it was placed.
+    pub align: AlignMode,
     /// The segmentation, with the threads it ran on.
     pub segmented: Option<(SegmentSummary, usize)>,
     pub dataset: PathBuf,
@@ -91,6 +93,9 @@ impl AddedSurvey {
                 100.0 * r.relative_residual,
                 r.similarity.scale
             ),
+            None if self.align == AlignMode::Colmap => {
+                format!("added survey {} (registered by COLMAP)", self.name)
+            }
             None => format!("added survey {} (same frame)", self.name),
         });
         lines
@@ -172,6 +177,7 @@ pub fn add_new_survey(
         index,
         views,
         registration,
+        align: survey.align,
         segmented,
         dataset: survey.dataset.clone(),
     }))

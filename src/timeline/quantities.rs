@@ -5,6 +5,7 @@
 use serde::Serialize;
 
 use super::components::components_at;
+use super::georeference::GeodeticPosition;
 use super::twin::{TimelineError, Twin};
 use crate::damage::DamageClass;
 use crate::damage::measure::{
@@ -22,6 +23,9 @@ pub struct ReportRegion {
     /// The centroid's z in metres: its height where the twin frame has z up and the ground at
     /// z = 0 (the demo building does).
     pub height_m: f64,
+    /// The centroid's latitude, longitude and height, where the twin is georeferenced
+    /// (`timeline::georeference`).
+    pub geodetic: Option<GeodeticPosition>,
     /// The building component under the centroid, where the dataset labels components.
     pub component: Option<String>,
     pub length_m: Option<f64>,
@@ -66,6 +70,7 @@ pub struct SurveyQuantities {
 pub fn survey_quantities(twin: &Twin) -> Result<Vec<SurveyQuantities>, TimelineError> {
     let metres = twin.project.settings.metres_per_unit.unwrap_or(1.0);
     let config = MeasureConfig::for_scale(metres);
+    let georeference = twin.georeference()?;
     let names: Vec<String> = twin
         .project
         .surveys
@@ -90,7 +95,7 @@ pub fn survey_quantities(twin: &Twin) -> Result<Vec<SurveyQuantities>, TimelineE
             .map(|r| glam::DVec3::from_array(r.centroid))
             .collect();
         let components = components_at(&dataset, &centroids, metres);
-        let regions = report_regions(
+        let mut regions = report_regions(
             name,
             &names,
             &measurement,
@@ -98,6 +103,11 @@ pub fn survey_quantities(twin: &Twin) -> Result<Vec<SurveyQuantities>, TimelineE
             &components,
             metres,
         );
+        if let Some(g) = &georeference {
+            for (region, centroid) in regions.iter_mut().zip(&centroids) {
+                region.geodetic = g.geodetic(*centroid);
+            }
+        }
         let survey = &twin.project.surveys[index];
         out.push(SurveyQuantities {
             survey: name.clone(),
@@ -179,6 +189,7 @@ fn report_regions(
                 class: region.class,
                 centroid_m: region.centroid.map(|c| c * metres),
                 height_m: region.centroid[2] * metres,
+                geodetic: None,
                 component: component.clone(),
                 length_m: region.length.map(|l| l * metres),
                 width_m: region.width.map(|w| w * metres),

@@ -1,7 +1,8 @@
 //! A survey's dataset as the twin sees it: its own views only (a joint model also holds the
 //! earlier surveys' images) with every pose in the twin's frame; and adding a survey, placed
-//! `same-frame` (its poses already are in the twin's frame) or `joint` (registered through the
-//! images it shares with the twin's latest survey).
+//! `same-frame` (its poses already are in the twin's frame), `joint` (registered through the
+//! images it shares with the twin's latest survey) or `colmap` (registered by COLMAP into an
+//! earlier survey's model, `register_survey`).
 
 use std::path::Path;
 
@@ -12,6 +13,7 @@ use crate::scene::open::OpenOptions;
 use crate::scene::project::{Alignment, Survey};
 use crate::scene::{Camera, Dataset};
 use crate::timeline::align::{Registration, Similarity, register};
+use crate::timeline::register_survey::REGISTRATION_FILE;
 use crate::timeline::twin::{TimelineError, Twin};
 
 /// How a new survey is placed in the twin's frame.
@@ -22,10 +24,15 @@ pub enum AlignMode {
     SameFrame,
     /// A COLMAP model of the earlier survey's images and the new ones in a frame of its own.
     Joint,
+    /// A dataset registered by COLMAP into an earlier survey's model, its poses held
+    /// (`twin add-survey --photos`, `register_survey`): that survey's frame.
+    Colmap,
 }
 
 impl AlignMode {
-    /// Every alignment, in the order the app offers them.
+    /// The alignments the app offers for a posed dataset, in order. `Colmap` is not among them:
+    /// it takes photos that COLMAP registers first (`twin add-survey --photos`), which the app
+    /// does not do yet.
     pub const ALL: [AlignMode; 2] = [AlignMode::SameFrame, AlignMode::Joint];
 
     /// The name `--align` takes.
@@ -33,6 +40,7 @@ impl AlignMode {
         match self {
             AlignMode::SameFrame => "same-frame",
             AlignMode::Joint => "joint",
+            AlignMode::Colmap => "colmap",
         }
     }
 }
@@ -44,8 +52,9 @@ impl std::str::FromStr for AlignMode {
         match text {
             "same-frame" => Ok(AlignMode::SameFrame),
             "joint" => Ok(AlignMode::Joint),
+            "colmap" => Ok(AlignMode::Colmap),
             _ => Err(format!(
-                "unknown alignment {text:?}: use same-frame or joint"
+                "unknown alignment {text:?}: use same-frame, joint or colmap"
             )),
         }
     }
@@ -121,8 +130,13 @@ impl Twin {
             dataset: self.relative(dataset),
             ..Survey::default()
         };
+        let mut record = None;
         let registration = match align {
             AlignMode::SameFrame => None,
+            AlignMode::Colmap => {
+                record = Some(self.place_registered(&mut survey, dataset)?);
+                None
+            }
             AlignMode::Joint => {
                 let latest = self.latest()?.name.clone();
                 let twin_views = self.open_survey_dataset(&latest)?;
@@ -182,6 +196,12 @@ impl Twin {
                 file: self.file(),
                 problem,
             })?;
+        // Kept with the survey's other records when committed (a check on a copy writes none).
+        if let Some(record) = record
+            && self.is_committing()
+        {
+            self.write_survey_json(name, REGISTRATION_FILE, &record)?;
+        }
         Ok(registration)
     }
 }

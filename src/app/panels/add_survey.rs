@@ -148,6 +148,10 @@ fn align_hint(align: AlignMode) -> &'static str {
             "A COLMAP model of the latest survey's images and the new ones, registered through \
              the images they share"
         }
+        AlignMode::Colmap => {
+            "Photos already registered by COLMAP into a posed survey's model \
+             (`twin add-survey --photos`)"
+        }
     }
 }
 

@@ -1,6 +1,6 @@
 //! `damage-twin twin status DIR [--json]`: the project's surveys in date order, each with its
 //! dataset and model (paths relative to DIR), Gaussians, damage Gaussians per class and those
-//! first seen in that survey.
+//! first seen in that survey, and for a survey registered by COLMAP the registration's residual.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -9,6 +9,7 @@ use serde::Serialize;
 
 use damage_twin::damage::DamageClass;
 use damage_twin::splats::model::sigmoid;
+use damage_twin::timeline::register_survey::SurveyRegistration;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -31,6 +32,8 @@ struct SurveyStatus {
     new_damage: BTreeMap<String, usize>,
     aligned: bool,
     changes: Option<PathBuf>,
+    /// How the survey was registered by COLMAP into an earlier one's model (`--align colmap`).
+    registration: Option<SurveyRegistration>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -71,6 +74,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             new_damage,
             aligned: survey.alignment.is_some(),
             changes: survey.changes.clone(),
+            registration: twin.load_registration(&survey.name)?,
         });
     }
     if args.json {
@@ -93,6 +97,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .as_ref()
                 .map_or("-".into(), |p| p.display().to_string())
         );
+        if let Some(record) = &s.registration {
+            println!("    {}", record.describe());
+        }
     }
     Ok(())
 }

@@ -290,6 +290,53 @@ mod tests {
     }
 
     #[test]
+    fn known_points_convert_as_published_and_round_trip() {
+        // WGS84 in ECEF: the equator at Greenwich is one semi-major axis out, the pole one
+        // semi-minor axis (6 356 752.314 m) up; (45° N, 45° E, 0 m) is the textbook point
+        // (3 194 419.145, 3 194 419.145, 4 487 348.409).
+        let close = |a: DVec3, b: DVec3| a.distance(b) < 1e-3;
+        assert!(close(
+            geodetic_to_ecef(0.0, 0.0, 0.0),
+            DVec3::new(6_378_137.0, 0.0, 0.0)
+        ));
+        assert!(close(
+            geodetic_to_ecef(90.0, 0.0, 0.0),
+            DVec3::new(0.0, 0.0, 6_356_752.314)
+        ));
+        assert!(close(
+            geodetic_to_ecef(45.0, 45.0, 0.0),
+            DVec3::new(3_194_419.145, 3_194_419.145, 4_487_348.409)
+        ));
+        // ENU at Lund: 1000 m up is 1000 m higher at the same latitude and longitude; 1000 m
+        // east is 1000 / (N cos φ) radians of longitude (N the prime vertical radius).
+        let origin = (55.698, 13.195, 37.0);
+        let (lat, lon, h) = enu_to_geodetic(DVec3::new(0.0, 0.0, 1000.0), origin);
+        assert!((lat - origin.0).abs() < 1e-9 && (lon - origin.1).abs() < 1e-9);
+        assert!((h - 1037.0).abs() < 1e-6, "{h}");
+        let e2 = FLATTENING * (2.0 - FLATTENING);
+        let phi = origin.0.to_radians();
+        let n = SEMI_MAJOR_M / (1.0 - e2 * phi.sin().powi(2)).sqrt();
+        let (lat, lon, _) = enu_to_geodetic(DVec3::new(1000.0, 0.0, 0.0), origin);
+        let expected = origin.1 + (1000.0 / ((n + origin.2) * phi.cos())).to_degrees();
+        assert!((lon - expected).abs() < 1e-8, "{lon} {expected}");
+        // 1 km east along the tangent plane is a great circle's start, which bends south of the
+        // parallel in the northern hemisphere: ≈ d² tan φ / 2R = 0.12 m, about 1e-6°.
+        assert!(lat < origin.0 && origin.0 - lat < 2e-6, "{lat}");
+        // Round trips over a few kilometres, to a tenth of a millimetre.
+        for p in [
+            DVec3::new(3000.0, -2500.0, 120.0),
+            DVec3::new(-40.0, 15.0, -5.0),
+            DVec3::ZERO,
+        ] {
+            let (lat, lon, h) = enu_to_geodetic(p, origin);
+            assert!(
+                geodetic_to_enu((lat, lon, h), origin).distance(p) < 1e-4,
+                "{p}"
+            );
+        }
+    }
+
+    #[test]
     fn gps_fit_recovers_scale_north_and_rejects_a_bad_fix() {
         // Cameras on a 40 m × 25 m grid in a model frame at 1/5 scale, rotated and shifted.
         let origin = (55.7, 13.2, 30.0);

@@ -6,6 +6,8 @@
 //!   from its own output, failures reported with the command and its last lines.
 //! - `progress`: COLMAP's log lines as progress (stage, done, total).
 //! - `pose`: the pipeline (stage, extract, match, map, largest component, dataset, commit).
+//! - `register`: a later survey's photos registered into a model `pose` kept, its poses fixed.
+//! - `workspace`: the photo folder and COLMAP workspace both share (photos, masks, arguments).
 //! - `exif`: the photos' focal length and GPS position.
 //! - `georef`: the similarity from the SfM frame to a local east-north-up frame in metres.
 //! - `control`: surveyed control points (CSV) and the fit to them, with check points.
@@ -19,9 +21,12 @@ pub mod exif;
 pub mod georef;
 pub mod pose;
 pub mod progress;
+pub mod register;
+pub mod workspace;
 
 pub use engine::Colmap;
 pub use error::SfmError;
 pub use georef::{GeorefSource, Georeference};
 pub use pose::{Matching, PoseOptions, PoseSummary, pose_photos};
 pub use progress::{Progress, Stage};
+pub use register::{RegisterSummary, RegistrationResidual, register_photos};

@@ -28,9 +28,6 @@ use serde::Serialize;
 use crate::scene::SceneError;
 use crate::scene::atomic::write_atomic;
 use crate::scene::colmap::{self, ColmapModel};
-use crate::scene::files::{EntryBudget, image_size, walk_files};
-use crate::scene::limits::MAX_LISTED_ENTRIES;
-use crate::scene::open::{list_images, stem_of};
 use crate::scene::run_folder::RunFolder;
 use crate::scene::sfm::SfmError;
 use crate::scene::sfm::control::{
@@ -40,6 +37,10 @@ use crate::scene::sfm::engine::Colmap;
 use crate::scene::sfm::exif::{PhotoExif, read_photo_exif};
 use crate::scene::sfm::georef::{Georeference, fit_gps};
 use crate::scene::sfm::progress::{Progress, Stage};
+use crate::scene::sfm::workspace::{
+    check_target, copy_masks, extract_args, failed_log_path, file_name, focal_prior,
+    keep_failed_log, link_or_copy, list_photos, mean_error, read_components,
+};
 
 /// How image pairs are chosen for matching.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -173,26 +174,7 @@ pub fn pose_photos(
         std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
     }
     let log = run.path(LOG_FILE);
-    // A failure keeps COLMAP's log beside the target (the staging folder is removed), named so
-    // that it is not mistaken for a dataset.
-    let keep_log = |error: SfmError| -> SfmError {
-        let kept = failed_log_path(out);
-        let copied = std::fs::copy(&log, &kept).is_ok();
-        match error {
-            SfmError::EngineFailed {
-                command,
-                status,
-                tail,
-                ..
-            } if copied => SfmError::EngineFailed {
-                command,
-                status,
-                tail,
-                log: kept,
-            },
-            other => other,
-        }
-    };
+    let keep_log = |error: SfmError| keep_failed_log(&log, out, error);
     for file in &files {
         link_or_copy(file, &images.join(file_name(file)))?;
     }
@@ -214,28 +196,13 @@ pub fn pose_photos(
     let threads = options.threads.max(1).to_string();
     let arg = |s: &str| OsString::from(s);
     let path_arg = |p: &Path| p.as_os_str().to_owned();
-    let mut extract = vec![
-        arg("--database_path"),
-        path_arg(&db),
-        arg("--image_path"),
-        path_arg(&images),
-        arg("--ImageReader.single_camera"),
-        arg("1"),
-        arg("--ImageReader.camera_model"),
-        arg("SIMPLE_RADIAL"),
-        arg("--SiftExtraction.use_gpu"),
-        arg("0"),
-        arg("--SiftExtraction.num_threads"),
-        arg(&threads),
-        arg("--SiftExtraction.max_num_features"),
-        arg(&options.max_features.to_string()),
-    ];
-    if let Some(params) = focal_prior(&files, &exif) {
-        extract.extend([arg("--ImageReader.camera_params"), arg(&params)]);
-    }
-    if ignore_masks && let Some(m) = &masks {
-        extract.extend([arg("--ImageReader.mask_path"), path_arg(m)]);
-    }
+    let extract = extract_args(
+        &db,
+        &images,
+        options,
+        focal_prior(&files, &exif),
+        masks.as_deref().filter(|_| ignore_masks),
+    );
     let n = files.len();
     let step = |command: &str, args: &[OsString]| {
         colmap
@@ -378,7 +345,7 @@ pub fn pose_photos(
 
 /// Mapper settings beyond COLMAP's defaults, chosen by measurement on the lund photos
 /// (docs/POSE.md).
-const MAPPER_SETTINGS: &[&str] = &["--Mapper.ba_refine_principal_point", "0"];
+pub(super) const MAPPER_SETTINGS: &[&str] = &["--Mapper.ba_refine_principal_point", "0"];
 
 /// Initial-pair thresholds tried in turn. COLMAP 3.8's defaults (100 inliers, 16°) found no
 /// initial pair on lund; the first relaxed set registered all 29 photos within 0.3° of the
@@ -401,146 +368,6 @@ const INITIAL_PAIR_SETTINGS: &[&[&str]] = &[
         "4",
     ],
 ];
-
-/// The shared camera's starting SIMPLE_RADIAL parameters `f,cx,cy,0` from the photos' EXIF
-/// 35 mm-equivalent focal length (`f = f35 / 36 mm × the longer side`), when every photo has
-/// one size and the photos that state a focal length agree. COLMAP 3.8 does not read that tag
-/// by itself: on lund (no make or model in EXIF) it starts from 1024 px instead of 996 and
-/// splits the street in two components (docs/POSE.md).
-fn focal_prior(files: &[PathBuf], exif: &[PhotoExif]) -> Option<String> {
-    let mut focals: Vec<f64> = exif.iter().filter_map(|e| e.focal_35mm).collect();
-    focals.sort_by(f64::total_cmp);
-    let median = *focals.get(focals.len() / 2)?;
-    if focals.iter().any(|f| (f - median).abs() > 0.5) {
-        return None;
-    }
-    let size = image_size(files.first()?).ok()?;
-    if files[1..].iter().any(|f| image_size(f).ok() != Some(size)) {
-        return None;
-    }
-    let (w, h) = (f64::from(size.0), f64::from(size.1));
-    let f = median / 36.0 * w.max(h);
-    Some(format!("{f:.2},{},{},0", w / 2.0, h / 2.0))
-}
-
-/// Where a failed run's COLMAP log is kept: beside the target, `<name>.pose-failed.log`.
-pub fn failed_log_path(out: &Path) -> PathBuf {
-    let name = out
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "dataset".into());
-    out.with_file_name(format!("{name}.pose-failed.log"))
-}
-
-fn file_name(path: &Path) -> String {
-    path.file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default()
-}
-
-/// The photos (JPEG, PNG) directly in `dir`, sorted; at least 2, with distinct stems (masks
-/// and views are named by stem).
-fn list_photos(dir: &Path) -> Result<Vec<PathBuf>, SfmError> {
-    if !dir.is_dir() {
-        return Err(SfmError::input(dir, "not a folder of photos"));
-    }
-    let files = list_images(dir, &mut EntryBudget::new(MAX_LISTED_ENTRIES));
-    if files.len() < 2 {
-        return Err(SfmError::input(
-            dir,
-            format!(
-                "{} photo(s) (JPEG or PNG): structure from motion needs at least 2 overlapping \
-                 photos",
-                files.len()
-            ),
-        ));
-    }
-    let mut stems: Vec<String> = files.iter().map(|f| stem_of(f)).collect();
-    stems.sort();
-    if let Some(pair) = stems.windows(2).find(|w| w[0] == w[1]) {
-        return Err(SfmError::input(
-            dir,
-            format!(
-                "two photos are named {}.*: views and masks are named by the file stem",
-                pair[0]
-            ),
-        ));
-    }
-    Ok(files)
-}
-
-/// The target must not hold anything yet: `pose` never mixes a new model with old files.
-fn check_target(out: &Path) -> Result<(), SfmError> {
-    match std::fs::read_dir(out) {
-        Ok(mut entries) => {
-            if entries.next().is_some() {
-                return Err(SfmError::input(
-                    out,
-                    "exists and is not empty: choose a new folder for the dataset",
-                ));
-            }
-            Ok(())
-        }
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(SceneError::io(out, e).into()),
-    }
-}
-
-fn link_or_copy(from: &Path, to: &Path) -> Result<(), SceneError> {
-    if let Some(parent) = to.parent() {
-        std::fs::create_dir_all(parent).map_err(|e| SceneError::io(parent, e))?;
-    }
-    if std::fs::hard_link(from, to).is_ok() {
-        return Ok(());
-    }
-    std::fs::copy(from, to)
-        .map(|_| ())
-        .map_err(|e| SceneError::io(from, e))
-}
-
-/// The masks beside the photos (`PHOTOS/masks/`, or `masks/` next to a folder named `images`),
-/// copied (every PNG, keeping sub-folders) to `to`; `None` when there are none.
-fn copy_masks(photos: &Path, to: &Path) -> Result<Option<PathBuf>, SfmError> {
-    let beside = photos
-        .file_name()
-        .is_some_and(|n| n == "images")
-        .then(|| photos.with_file_name("masks"));
-    let Some(source) = std::iter::once(photos.join("masks"))
-        .chain(beside)
-        .find(|d| d.is_dir())
-    else {
-        return Ok(None);
-    };
-    let is_png = |p: &Path| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"));
-    let files = walk_files(
-        &source,
-        8,
-        &mut EntryBudget::new(MAX_LISTED_ENTRIES),
-        is_png,
-    );
-    for relative in &files {
-        link_or_copy(&source.join(relative), &to.join(relative))?;
-    }
-    Ok((!files.is_empty()).then(|| to.to_path_buf()))
-}
-
-/// Every model COLMAP's mapper wrote (`sparse/0`, `sparse/1`, …).
-fn read_components(sparse: &Path) -> Result<Vec<ColmapModel>, SfmError> {
-    let mut models = Vec::new();
-    let entries = std::fs::read_dir(sparse).map_err(|e| SceneError::io(sparse, e))?;
-    for entry in entries.flatten() {
-        let dir = entry.path();
-        if dir.join("cameras.bin").is_file() {
-            models.push(colmap::read_binary(&dir)?);
-        }
-    }
-    Ok(models)
-}
-
-fn mean_error(model: &ColmapModel) -> f64 {
-    let n = model.points.len().max(1) as f64;
-    model.points.iter().map(|p| p.error).sum::<f64>() / n
-}
 
 /// The georeference from the registered photos' GPS, or why there is none.
 fn georeference_from_gps(

@@ -6,6 +6,7 @@
 //! Processed file [3/29]                 feature extraction
 //! Matching image [11/29]                sequential and spatial matching
 //! Matching block [1/2, 2/2]             exhaustive matching
+//! Matching block [1/3]                  a pair list (`matches_importer`)
 //! Registering image #12 (14)            mapping (COLMAP 4: "(num_reg_frames=14)")
 //! ```
 
@@ -57,9 +58,20 @@ pub fn parse_line(line: &str, photos: usize) -> Option<Progress> {
         });
     }
     if let Some(rest) = after(line, "Matching block [") {
-        // "[i/n, j/m]": block (i, j) of n × m, row by row.
+        // "[i/n, j/m]": block (i, j) of n × m, row by row; "[i/n]": block i of a pair list
+        // (`matches_importer`).
         let (i, n) = fraction(rest)?;
-        let (j, m) = fraction(rest.split_once(',')?.1.trim_start())?;
+        let Some((_, second)) = rest
+            .split_once(',')
+            .filter(|(first, _)| !first.contains(']'))
+        else {
+            return Some(Progress {
+                stage: Stage::Match,
+                done: i,
+                total: n,
+            });
+        };
+        let (j, m) = fraction(second.trim_start())?;
         return Some(Progress {
             stage: Stage::Match,
             done: (i.checked_sub(1)? * m + j).min(n * m),
@@ -124,6 +136,10 @@ mod tests {
                 29
             ),
             p(Stage::Map, 7, 29)
+        );
+        assert_eq!(
+            parse_line("Matching block [2/5] in 1.2s", 29),
+            p(Stage::Match, 2, 5)
         );
         assert_eq!(parse_line("Elapsed time: 0.123 [minutes]", 29), None);
         assert_eq!(parse_line("Processed file [30/29]", 29), None);

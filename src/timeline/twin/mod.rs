@@ -52,6 +52,9 @@ pub enum TimelineError {
     /// Segmenting a survey's photos (`twin add-survey --segment`).
     #[error(transparent)]
     Segment(#[from] crate::segment::SegmentError),
+    /// Registering a survey's photos by COLMAP (`twin add-survey --photos --align colmap`).
+    #[error(transparent)]
+    Sfm(#[from] crate::scene::sfm::SfmError),
     #[error(
         "{}: changed by another command since it was read; open the project again and redo the change",
         file.display()
@@ -377,7 +380,7 @@ impl Twin {
         read_json(&path).map(Some)
     }
 
-    fn write_survey_json(
+    pub(crate) fn write_survey_json(
         &mut self,
         name: &str,
         file: &str,
@@ -473,7 +476,7 @@ impl Twin {
 /// A JSON file of the project, read whole like any hostile input (`scene::files::read_regular`:
 /// a FIFO, a device or a folder is refused at once, a file over `MAX_PROJECT_JSON_BYTES` before
 /// it is read); a file that does not parse names itself.
-fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T, TimelineError> {
+pub(crate) fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T, TimelineError> {
     let bytes = read_regular(path, MAX_PROJECT_JSON_BYTES)?;
     serde_json::from_slice(&bytes).map_err(|e| TimelineError::Io {
         path: path.to_path_buf(),

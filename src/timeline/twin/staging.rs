@@ -66,6 +66,12 @@ impl Twin {
         Ok(folder.path(file))
     }
 
+    /// Whether this is the project of a `commit` in progress (its survey files are staged): a
+    /// change checked on a copy writes no record.
+    pub fn is_committing(&self) -> bool {
+        self.staged.committing
+    }
+
     /// Survey `name`'s `file` is replaced by this change even where it writes none (a training
     /// record without a history): the previous one does not stay beside what was written.
     pub fn replaces(&mut self, name: &str, file: &str) -> Result<(), TimelineError> {
