@@ -140,21 +140,26 @@ pub fn measure(decals: &[Decal], survey: u32, metres_per_unit: f64) -> Quantitie
     }
 }
 
-/// A bar's diameter in metres: the widest run of rebar texels across a column or row is the
-/// main bars' (the tie is thinner), measured on the decal itself.
+/// A bar's diameter in metres: the median over the decal's columns of the longest run of rebar
+/// texels down the column. Main bars run across the columns, so most columns cross them; the
+/// few through the tie, which runs down them, are outvoted.
 fn bar_diameter(decal: &Decal, texel_m: f64) -> f64 {
     let is_bar = |i: usize, j: usize| {
         decal.texels[j * decal.width + i].is_some_and(|t| t.class == DamageClass::Rebar)
     };
-    let mut longest_run = 0usize;
-    for i in 0..decal.width {
-        let mut run = 0;
-        for j in 0..decal.height {
-            run = if is_bar(i, j) { run + 1 } else { 0 };
-            longest_run = longest_run.max(run);
-        }
-    }
-    (longest_run.max(1) as f64) * texel_m
+    let mut runs: Vec<usize> = (0..decal.width)
+        .map(|i| {
+            let (mut run, mut longest) = (0usize, 0usize);
+            for j in 0..decal.height {
+                run = if is_bar(i, j) { run + 1 } else { 0 };
+                longest = longest.max(run);
+            }
+            longest
+        })
+        .filter(|&r| r > 0)
+        .collect();
+    runs.sort_unstable();
+    (runs.get(runs.len() / 2).copied().unwrap_or(1) as f64) * texel_m
 }
 
 /// Length of a binary shape's centre line in texels: Guo–Hall thinning, then each pair of
