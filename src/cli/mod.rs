@@ -19,6 +19,7 @@ mod refine;
 mod render;
 mod report;
 mod segment;
+mod stamp;
 mod study;
 mod synth;
 mod train;
@@ -46,6 +47,8 @@ enum Command {
     Inspect(inspect::Args),
     /// Generate the procedural damaged building and its two drone surveys (the demo data).
     Synth(synth::Args),
+    /// Damage with exact truth drawn onto a real posed capture's photos (two surveys).
+    Stamp(stamp::Args),
     /// Pose a folder of photos with COLMAP and write a dataset (metres and north from EXIF GPS).
     Pose(pose::Args),
     /// Train a splat model from a dataset (CPU engine); writes model.ply, metrics.json, curve.csv.
@@ -108,6 +111,7 @@ pub fn main() -> ExitCode {
         None => launch::demo_window(),
         Some(Command::Inspect(args)) => inspect::run(args),
         Some(Command::Synth(args)) => synth::run(args),
+        Some(Command::Stamp(args)) => stamp::run(args),
         Some(Command::Pose(args)) => pose::run(args),
         Some(Command::Train(args)) => train::run(args),
         Some(Command::Eval(args)) => eval::run(args),

@@ -20,6 +20,7 @@ pub mod noise;
 pub mod params;
 pub mod quantities;
 pub mod render;
+pub mod stamp;
 pub mod write;
 
 pub use generate::{World, generate, view_name};
