@@ -223,14 +223,7 @@ impl TileBins {
                 // the index breaks ties deterministically.
                 let key = ((projected.depths[g].to_bits() as u64) << 32) | g as u64;
                 self.depth_keys.push(key);
-                for ty in rect[1] as usize..rect[3] as usize {
-                    for tx in rect[0] as usize..rect[2] as usize {
-                        let tile = ty * tiles_x + tx;
-                        if active.is_none_or(|a| a[tile]) {
-                            self.cursor[tile] += 1;
-                        }
-                    }
-                }
+                for_each_tile(&rect, tiles_x, active, |tile| self.cursor[tile] += 1);
             }
         }
         radix_sort_by_depth(&mut self.depth_keys, &mut self.sort_scratch);
@@ -246,16 +239,11 @@ impl TileBins {
         for key in &self.depth_keys {
             let g = (*key & 0xffff_ffff) as u32;
             let rect = self.rects[g as usize];
-            for ty in rect[1] as usize..rect[3] as usize {
-                for tx in rect[0] as usize..rect[2] as usize {
-                    let tile = ty * tiles_x + tx;
-                    if active.is_none_or(|a| a[tile]) {
-                        let slot = &mut self.cursor[tile];
-                        self.gaussian_ids[*slot as usize] = g;
-                        *slot += 1;
-                    }
-                }
-            }
+            for_each_tile(&rect, tiles_x, active, |tile| {
+                let slot = &mut self.cursor[tile];
+                self.gaussian_ids[*slot as usize] = g;
+                *slot += 1;
+            });
         }
     }
 }
@@ -308,14 +296,7 @@ impl TileBins {
             if rect[2] > rect[0] {
                 let key = ((projected.depths[g].to_bits() as u64) << 32) | j as u64;
                 self.depth_keys.push(key);
-                for ty in rect[1] as usize..rect[3] as usize {
-                    for tx in rect[0] as usize..rect[2] as usize {
-                        let tile = ty * tiles_x + tx;
-                        if active.is_none_or(|a| a[tile]) {
-                            self.cursor[tile] += 1;
-                        }
-                    }
-                }
+                for_each_tile(&rect, tiles_x, active, |tile| self.cursor[tile] += 1);
             }
         }
         // Positions in `moving` ascend with the Gaussian index, so sorting by (depth,
@@ -336,16 +317,11 @@ impl TileBins {
         for key in &self.depth_keys {
             let j = (*key & 0xffff_ffff) as usize;
             let rect = self.rects[j];
-            for ty in rect[1] as usize..rect[3] as usize {
-                for tx in rect[0] as usize..rect[2] as usize {
-                    let tile = ty * tiles_x + tx;
-                    if active.is_none_or(|a| a[tile]) {
-                        let slot = &mut self.cursor[tile];
-                        self.moving_ids[*slot as usize] = moving[j];
-                        *slot += 1;
-                    }
-                }
-            }
+            for_each_tile(&rect, tiles_x, active, |tile| {
+                let slot = &mut self.cursor[tile];
+                self.moving_ids[*slot as usize] = moving[j];
+                *slot += 1;
+            });
         }
         self.tile_ranges.clear();
         let mut start = 0u32;
@@ -391,6 +367,23 @@ pub struct FrozenTiles<'a> {
 }
 
 /// Whether the tile rectangle `[x0, y0, x1, y1]` holds an active tile.
+/// Calls `f` with each tile of `rect` (row by row) that `active` leaves in (all when `None`).
+fn for_each_tile(
+    rect: &[u32; 4],
+    tiles_x: usize,
+    active: Option<&[bool]>,
+    mut f: impl FnMut(usize),
+) {
+    for ty in rect[1] as usize..rect[3] as usize {
+        for tx in rect[0] as usize..rect[2] as usize {
+            let tile = ty * tiles_x + tx;
+            if active.is_none_or(|a| a[tile]) {
+                f(tile);
+            }
+        }
+    }
+}
+
 fn rect_touches(rect: &[u32; 4], active: &[bool], tiles_x: usize) -> bool {
     (rect[1] as usize..rect[3] as usize).any(|ty| {
         active[ty * tiles_x + rect[0] as usize..ty * tiles_x + rect[2] as usize]

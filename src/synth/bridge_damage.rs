@@ -11,7 +11,7 @@ use glam::Vec2;
 
 use super::bridge::{CAP_DEPTH, PIER_SIZE, SPAN, girder_bottom, span_of, support_x};
 use super::building::Building;
-use super::cracks::{Crack, CrackSeed, grow};
+use super::cracks::{Crack, CrackSeed, extend_old_cracks, grow};
 use super::damage::{DamageState, Rebar, RegionIds, Spall, crack_width, facade_bounds};
 
 /// The side facades (front -y, back +y); the end facades stay clean.
@@ -58,24 +58,8 @@ pub fn generate(bridge: &Building, spans: u32, seed: u64) -> BridgeDamage {
     }
     for f in SIDES {
         let bounds = facade_bounds(&bridge.facades[f]);
-        let mut extended = Vec::new();
-        for c in cracks[f]
-            .iter()
-            .filter(|c| c.generation == 0 && changed(c.points[0].x))
-        {
-            if rng.f32() < 0.5 {
-                let n = c.points.len();
-                let dir = c.points[n - 1] - c.points[n - 2];
-                let seed = CrackSeed {
-                    start: c.points[n - 1],
-                    angle: dir.y.atan2(dir.x),
-                    length: 0.3 + 0.5 * rng.f32(),
-                    width: c.widths[n - 1].max(0.01),
-                    region: c.region,
-                };
-                grow(&mut rng, seed, bounds, 1, &mut extended);
-            }
-        }
+        let keep = |c: &Crack| changed(c.points[0].x);
+        let extended = extend_old_cracks(&mut rng, &cracks[f], keep, bounds, [0.3, 0.5], 0.01);
         cracks[f].extend(extended);
     }
     for &span in &changed_spans {

@@ -205,6 +205,36 @@ impl CrackField {
     }
 }
 
+/// Survey 2's growth of old cracks: each first-generation crack that `keep` accepts continues,
+/// with even odds, from its end in its own direction by `length[0] + length[1] × u` (u uniform
+/// in [0, 1)), at least `min_width` wide. Growth of an old crack is not new damage: it keeps the
+/// crack's region. Returns the extensions.
+pub fn extend_old_cracks(
+    rng: &mut fastrand::Rng,
+    cracks: &[Crack],
+    keep: impl Fn(&Crack) -> bool,
+    bounds: (Vec2, Vec2),
+    length: [f32; 2],
+    min_width: f32,
+) -> Vec<Crack> {
+    let mut extended = Vec::new();
+    for c in cracks.iter().filter(|c| c.generation == 0 && keep(c)) {
+        if rng.f32() < 0.5 {
+            let n = c.points.len();
+            let dir = c.points[n - 1] - c.points[n - 2];
+            let seed = CrackSeed {
+                start: c.points[n - 1],
+                angle: dir.y.atan2(dir.x),
+                length: length[0] + length[1] * rng.f32(),
+                width: c.widths[n - 1].max(min_width),
+                region: c.region,
+            };
+            grow(rng, seed, bounds, 1, &mut extended);
+        }
+    }
+    extended
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -5,7 +5,7 @@
 use glam::{Vec2, Vec3};
 
 use super::building::{BEAM_DEPTH, Building, COLUMN_HALF, Facade, SLAB_DEPTH};
-use super::cracks::{Crack, CrackField, CrackSeed, grow};
+use super::cracks::{Crack, CrackField, CrackSeed, extend_old_cracks, grow};
 use super::geometry::{Component, Geometry, Prim, Ray};
 use super::noise::{band_coverage, value_noise};
 use crate::scene::DamageClass;
@@ -263,22 +263,7 @@ pub fn generate(building: &Building, seed: u64) -> (DamageState, DamageState) {
     }
     for f in (0..4).filter(|&f| active(f)) {
         let bounds = facade_bounds(&building.facades[f]);
-        let mut extended = Vec::new();
-        for c in cracks[f].iter().filter(|c| c.generation == 0) {
-            if rng.f32() < 0.5 {
-                let n = c.points.len();
-                let dir = c.points[n - 1] - c.points[n - 2];
-                let seed = CrackSeed {
-                    start: c.points[n - 1],
-                    angle: dir.y.atan2(dir.x),
-                    length: 0.4 + 0.6 * rng.f32(),
-                    width: c.widths[n - 1].max(0.012),
-                    // Growth of an old crack, not new damage: it keeps the crack's region.
-                    region: c.region,
-                };
-                grow(&mut rng, seed, bounds, 1, &mut extended);
-            }
-        }
+        let extended = extend_old_cracks(&mut rng, &cracks[f], |_| true, bounds, [0.4, 0.6], 0.012);
         cracks[f].extend(extended);
         let mut fresh = Vec::new();
         add_cracks(
