@@ -330,19 +330,7 @@ impl Rasterizer {
         grads: &mut SplatGrads,
     ) {
         let t0 = Instant::now();
-        raster_backward::rasterize_backward(
-            &self.projected,
-            &self.bins,
-            &self.tile_state,
-            &self.segments,
-            self.label_channels,
-            settings,
-            v_out,
-            self.width,
-            self.height,
-            &mut self.isect_grads,
-            &mut self.gauss_grads,
-        );
+        self.blend_backward(settings, v_out);
         let f = &mut self.focus;
         raster_backward::unpack_screen_grads_of(
             &self.gauss_grads,

@@ -435,19 +435,7 @@ impl Rasterizer {
             return;
         }
         let t0 = Instant::now();
-        raster_backward::rasterize_backward(
-            &self.projected,
-            &self.bins,
-            &self.tile_state,
-            &self.segments,
-            self.label_channels,
-            settings,
-            v_out,
-            self.width,
-            self.height,
-            &mut self.isect_grads,
-            &mut self.gauss_grads,
-        );
+        self.blend_backward(settings, v_out);
         raster_backward::unpack_screen_grads(
             &self.gauss_grads,
             n,
@@ -466,6 +454,24 @@ impl Rasterizer {
         let t2 = Instant::now();
         self.timings.raster_backward = t1 - t0;
         self.timings.project_backward = t2 - t1;
+    }
+
+    /// The blending's backward over the last frame's tile lists into per-intersection and
+    /// per-Gaussian screen gradients: the same for a whole frame and a cached focused one.
+    fn blend_backward(&mut self, settings: &RenderSettings, v_out: &PixelGrads) {
+        raster_backward::rasterize_backward(
+            &self.projected,
+            &self.bins,
+            &self.tile_state,
+            &self.segments,
+            self.label_channels,
+            settings,
+            v_out,
+            self.width,
+            self.height,
+            &mut self.isect_grads,
+            &mut self.gauss_grads,
+        );
     }
 }
 

@@ -8,7 +8,7 @@
 use glam::Vec3;
 use serde::Serialize;
 
-use super::building::{Building, BuildingSpec, Facade, FacadeColumn};
+use super::building::{Building, BuildingSpec, Facade, FacadeColumn, prims_bounds};
 use super::geometry::{Component, Material, Prim};
 use super::noise::hash3;
 
@@ -217,12 +217,7 @@ pub fn bridge(spans: u32, seed: u32) -> Building {
             })
         })
         .collect();
-    let mut min = Vec3::splat(f32::INFINITY);
-    let mut max = Vec3::splat(f32::NEG_INFINITY);
-    for p in &b.prims {
-        min = min.min(p.min);
-        max = max.max(p.max);
-    }
+    let (min, max) = prims_bounds(&b.prims);
     Building {
         spec,
         prims: b.prims,

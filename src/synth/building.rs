@@ -122,12 +122,7 @@ impl Building {
         }
         b.roof(width, depth, top);
         b.props(width);
-        let mut min = Vec3::splat(f32::INFINITY);
-        let mut max = Vec3::splat(f32::NEG_INFINITY);
-        for p in &b.prims {
-            min = min.min(p.min);
-            max = max.max(p.max);
-        }
+        let (min, max) = prims_bounds(&b.prims);
         Building {
             spec,
             prims: b.prims,
@@ -527,4 +522,15 @@ pub fn balcony_bays(bays_x: u32) -> (u32, u32) {
 fn is_balcony_bay(bay: u32, bays_x: u32) -> bool {
     let (a, b) = balcony_bays(bays_x);
     bays_x >= 3 && bay >= a && bay <= b
+}
+
+/// The box holding every primitive (the structure's bounds).
+pub(super) fn prims_bounds(prims: &[Prim]) -> (Vec3, Vec3) {
+    let mut min = Vec3::splat(f32::INFINITY);
+    let mut max = Vec3::splat(f32::NEG_INFINITY);
+    for p in prims {
+        min = min.min(p.min);
+        max = max.max(p.max);
+    }
+    (min, max)
 }
