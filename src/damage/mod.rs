@@ -23,6 +23,7 @@ mod refine_quality;
 mod refine_selection;
 pub mod select;
 pub mod setup;
+pub mod truth_hulls;
 
 // The classes live beneath `scene` (mask folders and PLY properties are named by them).
 pub use crate::scene::damage_class::{DamageClass, NEW_DAMAGE_COLOUR};

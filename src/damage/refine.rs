@@ -13,7 +13,7 @@ use crate::damage::TrainMode;
 use crate::damage::evaluate::DamageReadout;
 pub use crate::damage::refine_config::RefineConfig;
 pub use crate::damage::refine_quality::Quality;
-use crate::damage::refine_quality::{full_step_ms, quality};
+use crate::damage::refine_quality::{full_step_ms, hull_coverage, quality};
 use crate::damage::refine_selection::{given_selection, region_labels, select_by_masks};
 use crate::damage::select::Selection;
 use crate::damage::setup::apply_mode;
@@ -56,6 +56,9 @@ pub struct RefineReport {
     pub hulls: usize,
     /// Mean share of a training view's pixels inside its hulls.
     pub hull_fraction: f64,
+    /// Per class, the share of the held-out views' reference damage pixels inside their hulls
+    /// (None without reference masks): what the refinement can reach at most.
+    pub hull_coverage: Option<std::collections::BTreeMap<String, f64>>,
     pub seconds: PhaseSeconds,
     pub selection_seconds: crate::damage::select::SelectTimes,
     pub gaussians_before: usize,
@@ -166,7 +169,7 @@ pub fn refine_from(
         lights,
         margin_px: config.crop_margin_px,
     };
-    let views = focus.draw_hulls(
+    let mut views = focus.draw_hulls(
         model,
         &selection.selected,
         &region_of,
@@ -177,6 +180,14 @@ pub fn refine_from(
             ctx.progress(Progress::counted("hulls", done, total, n));
         },
     )?;
+    if config.hulls_from_truth {
+        crate::damage::truth_hulls::replace_with_truth_hulls(
+            dataset,
+            &mut views,
+            config.scale,
+            config.hulls.dilate_px,
+        )?;
+    }
     seconds.hulls = t.elapsed().as_secs_f64();
 
     // 3. The crops of the training views' hulls, at the refinement scale.
@@ -239,6 +250,7 @@ pub fn refine_from(
     let heldout: Vec<&ViewHulls> = views.iter().filter(|v| v.heldout).collect();
     let before = quality(&focus, baseline, &heldout, config.background, &readout)?;
     let after = quality(&focus, &refined, &heldout, config.background, &readout)?;
+    let hull_coverage = hull_coverage(&focus, &heldout)?;
     seconds.evaluate = t.elapsed().as_secs_f64();
     seconds.total = started.elapsed().as_secs_f64();
 
@@ -257,6 +269,7 @@ pub fn refine_from(
         train_views: trained.len(),
         hulls: trained.iter().map(|v| v.hull_count).sum(),
         hull_fraction,
+        hull_coverage,
         seconds,
         selection_seconds: selection.seconds,
         gaussians_before: baseline.len(),
@@ -306,6 +319,7 @@ fn refine_spec(
     spec.lr.raw_labels = config.label_lr.or(config.lr.raw_labels);
     spec.max_scale_growth = config.max_scale_growth;
     spec.backend = config.backend;
+    spec.stop_when_flat = config.stop_when_flat;
     spec
 }
 

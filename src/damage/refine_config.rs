@@ -46,6 +46,11 @@ pub struct RefineConfig {
     pub neighbour_geometry_rate: Option<f32>,
     /// The renderer the refinement trains on.
     pub backend: crate::train::backend_choice::Backend,
+    /// Stop before `iterations` once the hull loss stops improving (None: run them all).
+    pub stop_when_flat: Option<crate::train::plateau::Plateau>,
+    /// A study's oracle: hulls from the dataset's truth masks instead of from the selection
+    /// (`truth_hulls`; refused without truth masks).
+    pub hulls_from_truth: bool,
 }
 
 impl Default for RefineConfig {
@@ -76,6 +81,8 @@ impl Default for RefineConfig {
             max_scale_growth: None,
             neighbour_geometry_rate: None,
             backend: Default::default(),
+            stop_when_flat: None,
+            hulls_from_truth: false,
         }
     }
 }

@@ -8,8 +8,9 @@ use std::time::Instant;
 use glam::Vec3;
 use serde::Serialize;
 
+use crate::damage::DamageClass;
 use crate::damage::TrainMode;
-use crate::damage::evaluate::{DamageReadout, evaluate_damage};
+use crate::damage::evaluate::{DamageReadout, ReferenceView, evaluate_damage};
 use crate::damage::reference::{load_reference_views, reference_source};
 use crate::raster::{RenderSettings, render};
 use crate::splats::Splats;
@@ -60,6 +61,48 @@ pub(super) fn full_step_ms(
     let mut stages = trainer.timings().clone();
     stages.subtract(&warm_up);
     Ok((ms, stages.per_step_ms(STEPS - 1)))
+}
+
+/// Per damage class, the share of the held-out views' reference pixels that lie inside the hulls
+/// drawn there (None without reference masks). Pixels outside every hull are never trained, so
+/// this bounds the refinement's recall: an update whose hulls miss new damage cannot learn it.
+pub(super) fn hull_coverage(
+    focus: &Focus,
+    heldout: &[&ViewHulls],
+) -> Result<Option<BTreeMap<String, f64>>, JobError> {
+    let Some(source) = reference_source(focus.dataset) else {
+        return Ok(None);
+    };
+    let indices: Vec<usize> = heldout.iter().map(|v| v.index).collect();
+    let views = load_reference_views(focus.dataset, &source, &indices, focus.scale)?;
+    Ok(Some(coverage_of(&views, heldout)))
+}
+
+/// `hull_coverage` of loaded reference views, each paired with its view's hulls; a class with
+/// no reference pixel is left out.
+fn coverage_of(views: &[ReferenceView], hulls: &[&ViewHulls]) -> BTreeMap<String, f64> {
+    let mut counts = [(0usize, 0usize); DamageClass::ALL.len()];
+    for (view, drawn) in views.iter().zip(hulls) {
+        let inside = drawn.union();
+        for (k, reference) in view.reference.iter().enumerate() {
+            let Some(reference) = reference else {
+                continue;
+            };
+            for (p, &r) in reference.data.iter().enumerate() {
+                let used = view.used.as_ref().is_none_or(|u| u.data[p] != 0);
+                if r != 0 && used {
+                    counts[k].1 += 1;
+                    counts[k].0 += usize::from(inside.data.get(p).is_some_and(|&h| h != 0));
+                }
+            }
+        }
+    }
+    DamageClass::ALL
+        .iter()
+        .zip(counts)
+        .filter(|(_, (_, total))| *total > 0)
+        .map(|(class, (hit, total))| (class.id().to_string(), hit as f64 / total as f64))
+        .collect()
 }
 
 /// Damage figures against the reference masks and PSNR (whole and outside the hulls) on the

@@ -7,3 +7,4 @@ pub mod hierarchy;
 pub mod mask_noise;
 pub mod segment;
 pub mod stability;
+pub mod update;

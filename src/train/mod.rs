@@ -15,6 +15,7 @@ pub mod importance;
 pub mod job;
 pub mod light_fit;
 pub mod loss;
+pub mod plateau;
 pub mod priority;
 pub mod run;
 pub mod scale_cap;

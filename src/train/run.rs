@@ -9,6 +9,7 @@ use crate::splats::Splats;
 use crate::train::backend_choice::open_backend;
 use crate::train::evaluate::EvalScores;
 use crate::train::job::{Job, JobContext, JobError, JobOptions, Progress};
+use crate::train::plateau::PlateauWatch;
 use crate::train::spec::{TrainSpec, TrainView};
 use crate::train::trainer::{StageTimes, TrainError, Trainer};
 
@@ -77,6 +78,7 @@ pub fn run_training(
         heldout,
     } = setup;
     let eval_every = spec.eval_every;
+    let mut plateau = spec.stop_when_flat.map(PlateauWatch::new);
     let choice = spec.backend;
     let (backend, renderer) = open_backend(choice).map_err(|source| TrainError::Backend {
         backend: choice,
@@ -135,6 +137,12 @@ pub fn run_training(
             trainer.sync();
             trainer.splats().clone()
         });
+        if plateau.as_mut().is_some_and(|p| p.push(report.loss)) {
+            ctx.log(format!(
+                "the loss stopped improving: stopped at step {step} of {total}"
+            ));
+            break;
+        }
     }
 
     let started = Instant::now();

@@ -254,6 +254,9 @@ pub struct TrainSpec {
     /// The renderer the run trains on (CPU by default).
     #[serde(default)]
     pub backend: crate::train::backend_choice::Backend,
+    /// Stop before `iterations` once the loss stops improving (`plateau`; None: run them all).
+    #[serde(default)]
+    pub stop_when_flat: Option<crate::train::plateau::Plateau>,
 }
 
 impl TrainSpec {
@@ -276,6 +279,7 @@ impl TrainSpec {
             appearance: None,
             geometry_rate: None,
             backend: Default::default(),
+            stop_when_flat: None,
         }
     }
 

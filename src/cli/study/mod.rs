@@ -6,6 +6,7 @@ mod hierarchy;
 mod mask_noise;
 mod segment;
 mod stability;
+mod update;
 
 #[derive(clap::Subcommand, Debug)]
 pub enum Study {
@@ -25,6 +26,9 @@ pub enum Study {
     /// within 2 px by scale and tile, seconds per megapixel) and on the demo building, alone and
     /// through a label-mode twin trained on them.
     Segment(segment::SegmentStudyArgs),
+    /// Survey updates run with different settings (`twin update`), from their metrics: held-out
+    /// IoU, hull coverage and survey 1's look against wall time, on one chart.
+    Update(update::UpdateStudyArgs),
 }
 
 pub fn run(study: Study) -> anyhow::Result<()> {
@@ -34,6 +38,7 @@ pub fn run(study: Study) -> anyhow::Result<()> {
         Study::Budget(args) => budget::run(args),
         Study::Stability(args) => stability::run(args),
         Study::Segment(args) => segment::run(args),
+        Study::Update(args) => update::run(args),
     }
 }
 

@@ -38,6 +38,14 @@ pub struct Args {
     /// are only neighbours of damage; damage and seeds learn at full rates (0: full for all).
     #[arg(long, default_value_t = damage_twin::timeline::update::NEIGHBOUR_GEOMETRY_RATE)]
     pub neighbour_geometry_rate: f32,
+    /// Stop once the hull loss has not improved by 1 % over two windows of this many steps in a
+    /// row (0: run every step; docs/TIMELINE.md).
+    #[arg(long, default_value_t = 0)]
+    pub plateau_window: u32,
+    /// Study oracle: draw the hulls from the survey's truth masks (synthetic surveys only), the
+    /// upper bound of what full hull coverage of the new damage buys.
+    #[arg(long)]
+    pub truth_hulls: bool,
     /// The renderer that trains: cpu, gpu or auto (see `train --backend`).
     #[arg(long, default_value = "cpu")]
     pub backend: damage_twin::train::backend_choice::Backend,
@@ -62,6 +70,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config.refine.backend = args.backend;
     config.refine.neighbour_geometry_rate =
         (args.neighbour_geometry_rate > 0.0).then_some(args.neighbour_geometry_rate);
+    config.refine.hulls_from_truth = args.truth_hulls;
+    config.refine.stop_when_flat =
+        (args.plateau_window > 0).then_some(damage_twin::train::plateau::Plateau {
+            window: args.plateau_window,
+            min_gain: 0.01,
+            patience: 2,
+        });
     if args.no_seeds {
         config.seeds = None;
     }
