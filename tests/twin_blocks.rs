@@ -73,6 +73,15 @@ fn project(root: &Path, name: &str, bridge: &Path, plan: &Path, merged: &Path) -
     dir
 }
 
+/// Runs `command`, which must fail with one line of error output holding `expected`.
+fn refused(mut command: Command, expected: &str) {
+    let output = command.output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "{command:?} succeeded");
+    assert!(stderr.contains(expected), "{stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+}
+
 fn update(dir: &Path, blocks: &str) -> Command {
     let mut command = binary();
     command
@@ -125,6 +134,19 @@ fn a_partitioned_twin_updates_only_its_changed_blocks() {
         .arg(&merged);
     run(local);
     let first_plan = snapshot(&plan);
+
+    // A plan of another survey's dataset is refused.
+    let mut other = binary();
+    other
+        .args(["twin", "new"])
+        .arg(root.path().join("other"))
+        .args(["--survey", "s2", "--date", "2025-05-01", "--dataset"])
+        .arg(bridge.join("survey-2"))
+        .arg("--model")
+        .arg(merged.join("model.ply"))
+        .arg("--plan")
+        .arg(&plan);
+    refused(other, "the plan is of");
 
     // Detection says which blocks changed, attributing every changed pixel it can place.
     let calm = project(root.path(), "calm", &bridge, &plan, &merged);
@@ -196,8 +218,15 @@ fn a_partitioned_twin_updates_only_its_changed_blocks() {
     assert_eq!(snapshot(&plan2.join("block-001")), trained);
     assert_eq!(std::fs::read(&after_path).unwrap(), bytes);
 
-    // Block 1 of another project SIGKILLed while it trains, then the update rerun.
+    // Block 1 of another project SIGKILLed while it trains, then the update rerun. Before it:
+    // with no detection and no --blocks the update is refused in one line.
     let killed = project(root.path(), "killed", &bridge, &plan, &merged);
+    let mut undetected = binary();
+    undetected
+        .args(["twin", "update"])
+        .arg(&killed)
+        .args(["--survey", "survey-2", "--quiet"]);
+    refused(undetected, "run `twin detect --survey survey-2` first");
     let mut slurm = update(&killed, "1");
     slurm.args(["slurm", "--cpus", "2"]);
     let written = run(slurm);
