@@ -37,7 +37,8 @@ pub fn surface_along(out: &RenderOutput, camera: &Camera, plan: &Plan) -> Vec<Op
     along
 }
 
-/// Block `k` of `plan` holding the surface at `along` (the block that keeps it at the merge).
+/// The block of `plan` whose own box holds the surface at `along` (the block that keeps it at
+/// the merge).
 pub fn block_of(plan: &Plan, along: f32) -> usize {
     (0..plan.blocks.len())
         .find(|&k| plan.keeps(k, along))
