@@ -177,6 +177,7 @@ fn command() -> JobCommand {
         binary: PathBuf::from("/shared/bin/damage-twin"),
         plan_dir: PathBuf::from("/shared/bridge/plan"),
         threads: Some(8),
+        finish: None,
     }
 }
 

@@ -49,42 +49,9 @@ pub fn merge_blocks(
                 ),
             ));
         }
-        let splats = crate::splats::ply::read_splats(&folder.join("model.ply"))?;
-        let into =
-            merged.get_or_insert_with(|| Splats::empty(splats.sh_degree, splats.label_channels));
-        if into.sh_degree != splats.sh_degree || into.label_channels != splats.label_channels {
-            return Err(SceneError::invalid(
-                folder.join("model.ply"),
-                format!(
-                    "SH degree {} and {} label channels differ from the other blocks' {} and {}",
-                    splats.sh_degree, splats.label_channels, into.sh_degree, into.label_channels
-                ),
-            ));
-        }
-        if into.overlay.is_none() {
-            into.overlay = splats.overlay;
-        }
-        let mut kept = 0;
-        for g in 0..splats.len() {
-            if !plan.keeps(k, plan.frame.coordinates(splats.means[g]).x) {
-                continue;
-            }
-            let id = into.len() as u64;
-            into.push(
-                splats.means[g],
-                splats.log_scales[g],
-                splats.rotations[g],
-                splats.raw_opacities[g],
-                splats.sh_of(g),
-                splats.labels_of(g),
-                id,
-                splats.meta.survey[g],
-            );
-            let last = into.len() - 1;
-            into.meta.damage_survey[last] = splats.meta.damage_survey[g];
-            into.meta.state[last] = splats.meta.state[g];
-            kept += 1;
-        }
+        let path = folder.join("model.ply");
+        let splats = crate::splats::ply::read_splats(&path)?;
+        let kept = keep_block(&mut merged, plan, k, &splats, &path)?;
         blocks.push(MergedBlock {
             block: k,
             trained: splats.len(),
@@ -96,4 +63,52 @@ pub fn merge_blocks(
         SceneError::invalid(plan_dir, "no block kept any Gaussian: nothing to merge")
     })?;
     Ok((merged, blocks))
+}
+
+/// Appends to `into` (started from the first part's SH degree and label channels) the Gaussians
+/// of `part` (read from `source`) whose centres lie in block `k`'s own box, each with its survey
+/// tags and state and a fresh id. Returns how many it kept; a part whose SH degree or label
+/// channels differ from `into`'s is an error naming `source`.
+pub fn keep_block(
+    into: &mut Option<Splats>,
+    plan: &Plan,
+    k: usize,
+    part: &Splats,
+    source: &Path,
+) -> Result<usize, SceneError> {
+    let into = into.get_or_insert_with(|| Splats::empty(part.sh_degree, part.label_channels));
+    if into.sh_degree != part.sh_degree || into.label_channels != part.label_channels {
+        return Err(SceneError::invalid(
+            source,
+            format!(
+                "SH degree {} and {} label channels differ from the other blocks' {} and {}",
+                part.sh_degree, part.label_channels, into.sh_degree, into.label_channels
+            ),
+        ));
+    }
+    if into.overlay.is_none() {
+        into.overlay = part.overlay;
+    }
+    let mut kept = 0;
+    for g in 0..part.len() {
+        if !plan.keeps(k, plan.frame.coordinates(part.means[g]).x) {
+            continue;
+        }
+        let id = into.len() as u64;
+        into.push(
+            part.means[g],
+            part.log_scales[g],
+            part.rotations[g],
+            part.raw_opacities[g],
+            part.sh_of(g),
+            part.labels_of(g),
+            id,
+            part.meta.survey[g],
+        );
+        let last = into.len() - 1;
+        into.meta.damage_survey[last] = part.meta.damage_survey[g];
+        into.meta.state[last] = part.meta.state[g];
+        kept += 1;
+    }
+    Ok(kept)
 }

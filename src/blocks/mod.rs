@@ -16,6 +16,7 @@ pub mod picture;
 pub mod plan;
 pub mod region;
 pub mod seam;
+pub mod surface;
 
 use std::path::Path;
 

@@ -13,6 +13,10 @@ use crate::train::views::{Holdout, split_views};
 /// Most points the partition looks at (a stride over the dataset's points beyond it).
 const MAX_POINTS: usize = 20_000;
 
+/// The share of the points a photo sees that must lie in a block's enlarged box for the photo to
+/// join it (`partition --min-share`, and a later survey's plan: `replan`).
+pub const DEFAULT_MIN_SHARE: f32 = 0.1;
+
 /// Where the cuts go along the long axis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Split {
@@ -141,7 +145,56 @@ pub fn partition(
             })
             .collect(),
     };
-    for &view in &train {
+    assign_photos(&mut plan, dataset, &train, &points, config.min_share);
+    Ok(plan)
+}
+
+/// The plan of a later survey of the same structure (`dataset`, opened from `dataset_path`, in
+/// `previous`'s frame): `previous`'s frame, cuts, margins and training settings, each block given
+/// the new survey's photos that see it by the rule `partition` uses, so block K of both plans
+/// covers the same part of the structure (`twin update` retrains a changed block on it).
+pub fn replan(
+    previous: &Plan,
+    dataset: &Dataset,
+    dataset_path: &std::path::Path,
+    min_share: f32,
+) -> Result<Plan, String> {
+    let holdout = Holdout::Auto {
+        every: previous.training.test_every,
+    };
+    let (train, _) = split_views(dataset, &holdout)?;
+    let centres: Vec<Vec3> = dataset.views.iter().map(|v| v.camera.position()).collect();
+    let points = structure_points(dataset, &centres);
+    let mut plan = Plan {
+        dataset: dataset_path.to_path_buf(),
+        blocks: previous
+            .blocks
+            .iter()
+            .map(|b| Block {
+                photos: Vec::new(),
+                skipped: None,
+                ..b.clone()
+            })
+            .collect(),
+        ..previous.clone()
+    };
+    assign_photos(&mut plan, dataset, &train, &points, min_share);
+    Ok(plan)
+}
+
+/// Gives each block of `plan` the training views (`train`, indices into `dataset`) that see its
+/// enlarged box: at least `min_share` of the `points` a photo sees lie in the box, or, for a
+/// photo seeing none, it was taken there. Blocks left with fewer than the plan's `min_photos`
+/// are skipped.
+fn assign_photos(
+    plan: &mut Plan,
+    dataset: &Dataset,
+    train: &[usize],
+    points: &[Vec3],
+    min_share: f32,
+) {
+    let local: Vec<Vec3> = points.iter().map(|&p| plan.frame.coordinates(p)).collect();
+    for &view in train {
         let camera = &dataset.views[view].camera;
         let seen: Vec<f32> = points
             .iter()
@@ -153,25 +206,25 @@ pub fn partition(
             let inside = seen.iter().filter(|&&a| plan.trains_on(k, a)).count();
             let sees = if seen.is_empty() {
                 // A photo that sees none of the points: by where it was taken.
-                plan.trains_on(k, frame.coordinates(centres[view]).x)
+                plan.trains_on(k, plan.frame.coordinates(camera.position()).x)
             } else {
-                inside > 0 && inside as f32 >= config.min_share * seen.len() as f32
+                inside > 0 && inside as f32 >= min_share * seen.len() as f32
             };
             if sees {
                 plan.blocks[k].photos.push(dataset.views[view].name.clone());
             }
         }
     }
+    let min_photos = plan.min_photos;
     for block in &mut plan.blocks {
-        if block.photos.len() < config.min_photos {
+        if block.photos.len() < min_photos {
             block.skipped = Some(format!(
                 "{} photos, fewer than the {} a block needs",
                 block.photos.len(),
-                config.min_photos
+                min_photos
             ));
         }
     }
-    Ok(plan)
 }
 
 /// The points the structure is cut by: the dataset's (a stride of at most `MAX_POINTS`), else

@@ -10,6 +10,7 @@ use glam::Vec3;
 use serde::Serialize;
 
 use crate::blocks::plan::Plan;
+use crate::blocks::surface::surface_along;
 use crate::damage::assess::{EvalRequest, ModelScores, evaluate_model};
 use crate::damage::evaluate::{DamageReadout, DamageScores, predicted_masks};
 use crate::damage::reference::{load_reference_views, reference_source};
@@ -19,9 +20,6 @@ use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
 use crate::scene::{Camera, Dataset, Mask, SceneError};
 use crate::splats::Splats;
 use crate::train::views::{Holdout, load_views, split_views};
-
-/// Least opacity at which a pixel's depth places it on the surface.
-const SURFACE_ALPHA: f32 = 0.05;
 
 /// Scores of one part of the held-out pixels.
 #[derive(Clone, Debug, Default, Serialize)]
@@ -161,30 +159,10 @@ pub fn seam_report(
 
 /// The pixels of a render whose surface lies within the plan's seam band of a boundary.
 fn band_mask(out: &RenderOutput, camera: &Camera, plan: &Plan, boundaries: &[f32]) -> Mask {
-    let k = camera.intrinsics;
-    let to_world = camera.rotation.inverse();
     let mut mask = Mask::empty(out.width, out.height);
-    for y in 0..out.height {
-        for x in 0..out.width {
-            let p = (y * out.width + x) as usize;
-            let alpha = out.alpha[p];
-            if alpha < SURFACE_ALPHA {
-                continue;
-            }
-            let z = out.depth[p] / alpha;
-            let in_camera = Vec3::new(
-                (x as f32 + 0.5 - k.cx) / k.fx * z,
-                (y as f32 + 0.5 - k.cy) / k.fy * z,
-                z,
-            );
-            let world = to_world * (in_camera - camera.translation);
-            let along = plan.frame.coordinates(world).x;
-            if boundaries
-                .iter()
-                .any(|b| (along - b).abs() <= plan.seam_band)
-            {
-                mask.data[p] = 1;
-            }
+    for (p, along) in surface_along(out, camera, plan).into_iter().enumerate() {
+        if along.is_some_and(|a| boundaries.iter().any(|b| (a - b).abs() <= plan.seam_band)) {
+            mask.data[p] = 1;
         }
     }
     mask

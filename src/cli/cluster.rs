@@ -46,6 +46,13 @@ pub struct Common {
 pub struct SlurmArgs {
     #[command(flatten)]
     pub common: Common,
+    #[command(flatten)]
+    pub resources: SlurmResourceArgs,
+}
+
+/// What each Slurm job asks for.
+#[derive(clap::Args, Clone, Debug)]
+pub struct SlurmResourceArgs {
     #[arg(long, default_value_t = 8)]
     pub cpus: usize,
     /// Memory per job in GiB.
@@ -64,6 +71,13 @@ pub struct SlurmArgs {
 pub struct K8sArgs {
     #[command(flatten)]
     pub common: Common,
+    #[command(flatten)]
+    pub resources: K8sResourceArgs,
+}
+
+/// Where each Kubernetes pod runs and what it asks for.
+#[derive(clap::Args, Clone, Debug)]
+pub struct K8sResourceArgs {
     /// Container image with the binary at --binary.
     #[arg(long, default_value = "damage-twin:latest")]
     pub image: String,
@@ -101,14 +115,18 @@ pub struct LocalArgs {
 
 pub fn run(command: Cluster) -> anyhow::Result<()> {
     match command {
-        Cluster::Slurm(args) => slurm(args),
-        Cluster::K8s(args) => k8s(args),
+        Cluster::Slurm(args) => slurm(&args.common, args.resources, None).map(drop),
+        Cluster::K8s(args) => k8s(&args.common, args.resources, None).map(drop),
         Cluster::Local(args) => local(args),
     }
 }
 
-/// The plan, its folder (absolute) and the command every job runs.
-fn job_command(common: &Common) -> anyhow::Result<(Plan, PathBuf, JobCommand, PathBuf)> {
+/// The plan, its folder (absolute) and the command every job runs (the last job `finish`, in
+/// place of the merge, when given).
+fn job_command(
+    common: &Common,
+    finish: Option<Vec<String>>,
+) -> anyhow::Result<(Plan, PathBuf, JobCommand, PathBuf)> {
     let plan = load_plan(&common.plan)?;
     let dir = std::fs::canonicalize(plan_folder(&common.plan))
         .with_context(|| format!("opening plan folder {}", common.plan.display()))?;
@@ -121,12 +139,19 @@ fn job_command(common: &Common) -> anyhow::Result<(Plan, PathBuf, JobCommand, Pa
         binary,
         plan_dir: dir.clone(),
         threads: common.threads,
+        finish,
     };
     Ok((plan, dir, command, model))
 }
 
-fn slurm(args: SlurmArgs) -> anyhow::Result<()> {
-    let (plan, dir, command, model) = job_command(&args.common)?;
+/// Writes the Slurm job files of the plan `common` names; `finish` replaces the merge job's
+/// command (`twin update` records into the twin instead).
+pub(crate) fn slurm(
+    common: &Common,
+    args: SlurmResourceArgs,
+    finish: Option<Vec<String>>,
+) -> anyhow::Result<PathBuf> {
+    let (plan, dir, command, model) = job_command(common, finish)?;
     let resources = SlurmResources {
         job_name: args.job_name,
         cpus: args.cpus,
@@ -145,7 +170,7 @@ fn slurm(args: SlurmArgs) -> anyhow::Result<()> {
         paths.submit.display(),
         paths.submit.display()
     );
-    Ok(())
+    Ok(paths.submit)
 }
 
 /// The deepest folder holding both `a` and `b`.
@@ -160,8 +185,13 @@ fn common_ancestor(a: &Path, b: &Path) -> PathBuf {
     shared
 }
 
-fn k8s(args: K8sArgs) -> anyhow::Result<()> {
-    let (plan, dir, command, model) = job_command(&args.common)?;
+/// Writes the Kubernetes job files of the plan `common` names; `finish` as for `slurm`.
+pub(crate) fn k8s(
+    common: &Common,
+    args: K8sResourceArgs,
+    finish: Option<Vec<String>>,
+) -> anyhow::Result<PathBuf> {
+    let (plan, dir, command, model) = job_command(common, finish)?;
     let mount = args
         .mount
         .unwrap_or_else(|| common_ancestor(&dir, &plan.dataset));
@@ -205,20 +235,25 @@ fn k8s(args: K8sArgs) -> anyhow::Result<()> {
         paths.apply.display(),
         paths.apply.display()
     );
-    Ok(())
+    Ok(paths.apply)
 }
 
-fn local(args: LocalArgs) -> anyhow::Result<()> {
-    let plan = load_plan(&args.plan)?;
-    let dir = plan_folder(&args.plan);
-    let workers = args.workers.max(1);
-    let threads = args.threads.unwrap_or_else(|| {
+/// Trains `plan`'s unfinished, unskipped blocks (its folder `dir`) as child processes of this
+/// binary, `workers` at a time with `threads` each (default: the cores shared out).
+pub(crate) fn train_locally(
+    dir: &Path,
+    plan: &Plan,
+    workers: usize,
+    threads: Option<usize>,
+) -> anyhow::Result<()> {
+    let workers = workers.max(1);
+    let threads = threads.unwrap_or_else(|| {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         (cores / workers).max(1)
     });
     let binary = std::env::current_exe().context("finding this binary's path")?;
     let mut queue: VecDeque<usize> = (0..plan.blocks.len())
-        .filter(|&k| plan.blocks[k].skipped.is_none() && finished(&dir, &plan, k).is_none())
+        .filter(|&k| plan.blocks[k].skipped.is_none() && finished(dir, plan, k).is_none())
         .collect();
     println!(
         "{} blocks to train on {workers} local workers ({threads} threads each)",
@@ -232,7 +267,7 @@ fn local(args: LocalArgs) -> anyhow::Result<()> {
         {
             let child = Command::new(&binary)
                 .arg("train-block")
-                .arg(&dir)
+                .arg(dir)
                 .args(["--block", &k.to_string(), "--quiet"])
                 .args(["--threads", &threads.to_string()])
                 .spawn()
@@ -263,9 +298,16 @@ fn local(args: LocalArgs) -> anyhow::Result<()> {
     }
     if !failed.is_empty() {
         anyhow::bail!(
-            "blocks {failed:?} failed; rerun `cluster local` to retrain only them (finished blocks are kept)"
+            "blocks {failed:?} failed; rerun to retrain only them (finished blocks are kept)"
         );
     }
+    Ok(())
+}
+
+fn local(args: LocalArgs) -> anyhow::Result<()> {
+    let plan = load_plan(&args.plan)?;
+    let dir = plan_folder(&args.plan);
+    train_locally(&dir, &plan, args.workers, args.threads)?;
     if let Some(out) = &args.out {
         println!("{}", super::merge::merge(&args.plan, out, true)?);
     }

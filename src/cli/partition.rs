@@ -34,7 +34,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0.5)]
     pub band: f32,
     /// A photo joins a block when this share of the points it sees lie in the block's enlarged box.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = damage_twin::blocks::partition::DEFAULT_MIN_SHARE)]
     pub min_share: f32,
     /// Blocks seeing fewer training photos are skipped.
     #[arg(long, default_value_t = 3)]

@@ -14,6 +14,8 @@ use crate::damage::{DamageClass, Palette};
 use crate::raster::RenderSettings;
 use crate::scene::ImageScale;
 use crate::scene::atomic::write_atomic;
+use crate::timeline::blocks::changed::{BlockChanges, changes_per_block};
+use crate::timeline::blocks::load_survey_blocks;
 use crate::timeline::changes::{
     DetectConfig, OLD_DAMAGE_THRESHOLD, StepScores, change_picture, detect,
 };
@@ -85,6 +87,10 @@ pub struct ChangeSummary {
     pub new_damage: BTreeMap<String, ClassFigures>,
     /// The same figures after each cleaning step: raw, band, area, earlier, vote.
     pub steps: Vec<StepScores>,
+    /// On a partitioned twin (`twin_of`'s model merged from a block plan), the changed pixels
+    /// per block (`timeline::blocks::changed`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub blocks: Option<BlockChanges>,
     /// The change maps' folder.
     #[serde(skip)]
     pub folder: PathBuf,
@@ -152,6 +158,20 @@ pub fn detect_survey(
         None
     };
     let detection = detect(&model, &dataset, &config, earlier.as_ref(), on_view)?;
+    let blocks = match load_survey_blocks(twin, &previous)? {
+        Some(record) => {
+            let plan = crate::blocks::load_plan(&record.plan)?;
+            Some(changes_per_block(
+                &plan,
+                &model,
+                &dataset,
+                &detection.views,
+                options.scale,
+                config.background,
+            )?)
+        }
+        None => None,
+    };
     // The pictures are made before the lock is taken; the lock is held only to write them.
     let mut pictures = Vec::with_capacity(detection.views.len());
     for view in &detection.views {
@@ -188,6 +208,7 @@ pub fn detect_survey(
         views: detection.views.len(),
         new_damage,
         steps: detection.steps,
+        blocks,
         folder: folder.clone(),
     };
     let json = serde_json::to_string_pretty(&summary)

@@ -7,6 +7,7 @@
 pub mod add_survey;
 pub mod align;
 pub mod appearance;
+pub mod blocks;
 pub mod changes;
 pub mod components;
 pub mod detect_survey;

@@ -1,6 +1,9 @@
 //! Shared by the block tests (`tests/blocks.rs`, `tests/slurm_blocks.rs`): the binary, a run
 //! that must succeed, and a tiny demo building partitioned into two blocks.
 
+// Each test binary uses only some of these helpers.
+#![allow(dead_code)]
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

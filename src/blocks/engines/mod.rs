@@ -15,6 +15,9 @@ pub struct JobCommand {
     pub plan_dir: std::path::PathBuf,
     /// Threads per block job (`--threads`; None: the job's CPUs).
     pub threads: Option<usize>,
+    /// What the last job runs instead of `merge PLAN --out MODEL` (None: the merge); `twin
+    /// update` on a partitioned twin merges and records into the twin this way.
+    pub finish: Option<Vec<String>>,
 }
 
 impl JobCommand {
@@ -32,8 +35,11 @@ impl JobCommand {
         args
     }
 
-    /// The merge job's command line, writing the merged model to `out`.
+    /// The merge job's command line, writing the merged model to `out` (or `finish`).
     pub fn merge(&self, out: &std::path::Path) -> Vec<String> {
+        if let Some(finish) = &self.finish {
+            return finish.clone();
+        }
         vec![
             self.binary.display().to_string(),
             "merge".into(),

@@ -5,6 +5,7 @@
 
 use std::path::PathBuf;
 
+use damage_twin::timeline::blocks::changed::MIN_CHANGED_PIXELS;
 use damage_twin::timeline::changes::OLD_DAMAGE_THRESHOLD;
 use damage_twin::timeline::detect_survey::{DetectOptions, detect_survey};
 
@@ -78,6 +79,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 _ => String::new(),
             };
             println!("  new {class:<9} {:>8} px{truth}", f.pixels);
+        }
+        if let Some(blocks) = &summary.blocks {
+            let changed = blocks.changed(MIN_CHANGED_PIXELS);
+            println!(
+                "blocks changed (at least {MIN_CHANGED_PIXELS} changed px): {changed:?}; `twin update` retrains them"
+            );
+            for b in &blocks.blocks {
+                println!(
+                    "  block {:>3}: {:>8} px new, {:>8} px gone",
+                    b.block, b.new_pixels, b.gone_pixels
+                );
+            }
+            if blocks.unplaced_pixels > 0 {
+                println!("  on no surface: {} px", blocks.unplaced_pixels);
+            }
         }
     }
     Ok(())

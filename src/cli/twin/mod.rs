@@ -8,6 +8,7 @@ mod new;
 mod set_scale;
 mod status;
 mod update;
+mod update_blocks;
 
 #[derive(clap::Subcommand, Debug)]
 pub enum Twin {

@@ -11,6 +11,7 @@ use damage_twin::damage::setup::{COARSE_SCALE, RunConfig, train_job};
 use damage_twin::scene::ImageScale;
 use damage_twin::scene::sfm::Georeference;
 use damage_twin::timeline::Twin;
+use damage_twin::timeline::blocks::record_plan;
 use damage_twin::timeline::record::record_training;
 use damage_twin::timeline::update::tag_damage;
 use damage_twin::train::history::History;
@@ -35,6 +36,10 @@ pub struct Args {
     /// The survey's model; without one, a model is trained.
     #[arg(long)]
     pub model: Option<PathBuf>,
+    /// The block plan the model was merged from (`merge PLAN`): a partitioned twin, which
+    /// `twin detect` and `twin update` treat block by block (docs/CLUSTER.md).
+    #[arg(long, requires = "model")]
+    pub plan: Option<PathBuf>,
     /// The project's scale (`twin update` and `twin detect` work at it unless given
     /// `--scale`), and the training scale when no model is given (4: 240×135 of a 960×540
     /// survey).
@@ -98,6 +103,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .commit(|twin| {
             if let Some((outcome, mode, scale, history)) = &trained {
                 record_training(twin, &args.survey, outcome, *mode, *scale, Some(history))?;
+            }
+            if let Some(plan) = &args.plan {
+                record_plan(twin, &args.survey, plan)?;
             }
             twin.save_model(&args.survey, &model)
         })

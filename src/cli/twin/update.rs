@@ -1,10 +1,13 @@
 //! `damage-twin twin update DIR --survey NAME [--strategy finetune|retrain]`: the twin of the
 //! survey before NAME, updated with NAME's photos and masks (`timeline::update`), written as
-//! NAME's model; every earlier survey's model stays as it was.
+//! NAME's model; every earlier survey's model stays as it was. On a partitioned twin (the model
+//! before NAME merged from blocks) only the changed blocks are retrained, through an engine
+//! (`update_blocks`).
 
 use std::path::PathBuf;
 
 use damage_twin::damage::refine::Strategy;
+use damage_twin::timeline::blocks::update::partitioned_previous;
 use damage_twin::timeline::update::{UpdateConfig, update_project_job};
 
 use crate::cli::args::{JobArgs, LockArgs, ProjectScaleArgs, drive};
@@ -53,12 +56,21 @@ pub struct Args {
     pub job: JobArgs,
     #[command(flatten)]
     pub lock: LockArgs,
+    // A partitioned twin's options: the blocks and the engine.
+    #[command(flatten)]
+    pub blocks: super::update_blocks::BlockArgs,
+    /// Partitioned twin: the engine that trains the changed blocks (default: one local process).
+    #[command(subcommand)]
+    pub engine: Option<super::update_blocks::Engine>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     // Read now, locked only to record the result when the training ends (`record_update`).
     let twin = super::open_to_write(&args.dir, &args.lock, "twin update")?;
     twin.survey_index(&args.survey)?;
+    if partitioned_previous(&twin, &args.survey)?.is_some() {
+        return super::update_blocks::run(twin, &args);
+    }
     let mut config = UpdateConfig::for_project(
         &twin,
         args.strategy,
