@@ -21,6 +21,10 @@ pub enum DialogKind {
     SurveyDataset,
     /// The ONNX model "Add survey…" segments the photos with.
     SegmentModel,
+    /// The folder of photos "New twin from photos…" poses.
+    TwinPhotos,
+    /// The later survey's photos "Add survey from photos…" registers.
+    SurveyPhotos,
 }
 
 /// What a click selects.
@@ -159,6 +163,22 @@ pub enum Command {
     /// with `CancelTimelineJob`.
     AddSurvey,
     CloseAddSurvey,
+    /// Open the "Add survey…" dialog for photos that COLMAP registers into the twin's frame.
+    OpenAddSurveyFromPhotos,
+    /// A folder chosen as the new survey's photos (fills an empty dataset and name).
+    ChooseSurveyPhotos(PathBuf),
+    /// Open the "New twin from photos…" dialog.
+    OpenNewTwin,
+    /// Replace its fields (the panel edits a copy and submits it).
+    EditNewTwin(Box<crate::app::twin_form::NewTwinForm>),
+    /// A folder chosen as the new twin's photos (fills the empty fields beside it).
+    ChooseTwinPhotos(PathBuf),
+    /// Pose the photos with COLMAP and make the twin project, on a worker.
+    NewTwinFromPhotos,
+    CancelNewTwin,
+    CloseNewTwin,
+    /// Show the log of the COLMAP run writing this dataset (None: close the log window).
+    ShowColmapLog(Option<PathBuf>),
     /// Snapping to a view shows its change map instead of its photo.
     ShowChangeMaps(bool),
     /// Undo or redo the last selection, visibility or damage-class edit.

@@ -19,6 +19,7 @@ pub mod state;
 pub mod survey_form;
 pub mod tools;
 pub mod training;
+pub mod twin_form;
 pub mod viewport;
 pub mod workers;
 
@@ -28,8 +29,8 @@ use std::sync::Arc;
 use crate::app::commands::{Command, DialogKind};
 use crate::app::demo::DemoPreparation;
 use crate::app::panels::{
-    AddSurveyPanel, ChartsPanel, LogPanel, ProjectPanel, RegionsPanel, SelectionPanel, StatsPanel,
-    TimelinePanel, TrainingPanel, ViewPanel,
+    AddSurveyPanel, ChartsPanel, ColmapLogPanel, LogPanel, NewTwinPanel, ProjectPanel,
+    RegionsPanel, SelectionPanel, StatsPanel, TimelinePanel, TrainingPanel, ViewPanel,
 };
 use crate::app::settings::Settings;
 use crate::app::state::AppState;
@@ -93,6 +94,8 @@ pub struct TwinApp {
     charts: ChartsPanel,
     timeline: TimelinePanel,
     add_survey: AddSurveyPanel,
+    new_twin: NewTwinPanel,
+    colmap_log: ColmapLogPanel,
     log: LogPanel,
     commands: Vec<Command>,
     demo: Option<DemoPreparation>,
@@ -123,6 +126,8 @@ impl TwinApp {
             charts: ChartsPanel,
             timeline: TimelinePanel::default(),
             add_survey: AddSurveyPanel,
+            new_twin: NewTwinPanel,
+            colmap_log: ColmapLogPanel,
             log: LogPanel,
             commands: Vec::new(),
             demo: None,
@@ -303,6 +308,8 @@ impl eframe::App for TwinApp {
                 .show(ui, |ui| self.timeline.ui(ui, state, commands));
         }
         self.add_survey.ui(&ctx, state, commands);
+        self.new_twin.ui(&ctx, state, commands);
+        self.colmap_log.ui(&ctx, state, commands);
         egui::CentralPanel::no_frame().show(ui, |ui| {
             // What the viewport drew with applies now, not after the next frame's panels: they
             // and the queued commands see the camera and size the picture shows.

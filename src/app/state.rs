@@ -25,12 +25,16 @@ use crate::train::history::History;
 mod adding_survey;
 mod editing;
 mod picking;
+mod posing;
+mod project_records;
 mod project_watch;
 mod refining;
 mod saving;
 mod timeline;
 mod view;
 
+pub use posing::{NewTwinDialog, PoseRun, colmap_log_of};
+pub use project_records::ProjectRecords;
 pub use project_watch::ProjectWatch;
 pub use refining::RefineSession;
 pub use timeline::{LoadedSurvey, TimelineJob, TimelineView, TimelineWork, survey_dataset};
@@ -139,6 +143,10 @@ pub struct AppState {
     pub timeline: Option<TimelineView>,
     /// The "Add survey…" dialog's fields while it is open.
     pub add_survey: Option<crate::app::survey_form::AddSurveyForm>,
+    /// The "New twin from photos…" dialog and its COLMAP run while it is open.
+    pub new_twin: Option<NewTwinDialog>,
+    /// The dataset whose COLMAP log the log window shows.
+    pub colmap_log: Option<PathBuf>,
     /// Surface points of the distance measurement (zero, one or two).
     pub distance: Vec<glam::Vec3>,
     pub log: VecDeque<String>,
@@ -175,6 +183,8 @@ impl AppState {
             refine: None,
             timeline: None,
             add_survey: None,
+            new_twin: None,
+            colmap_log: None,
             distance: Vec::new(),
             log: VecDeque::new(),
             viewport_pixels: [960, 540],
@@ -231,6 +241,8 @@ impl AppState {
         }
         changed |= self.poll_refine();
         changed |= self.poll_timeline();
+        changed |= self.poll_new_twin();
+        changed |= self.refresh_project_records();
         changed |= self.poll_project_watch();
         if let Some(session) = &mut self.training {
             let update = session.poll(&mut self.history);
@@ -500,6 +512,15 @@ impl AppState {
             Command::ChooseSegmentModel(file) => self.choose_segment_model(file),
             Command::AddSurvey => self.start_add_survey(),
             Command::CloseAddSurvey => self.add_survey = None,
+            Command::OpenAddSurveyFromPhotos => self.open_add_survey_from_photos(),
+            Command::ChooseSurveyPhotos(folder) => self.choose_survey_photos(folder),
+            Command::OpenNewTwin => self.open_new_twin(),
+            Command::EditNewTwin(form) => self.edit_new_twin(*form),
+            Command::ChooseTwinPhotos(folder) => self.choose_twin_photos(folder),
+            Command::NewTwinFromPhotos => self.start_new_twin(),
+            Command::CancelNewTwin => self.cancel_new_twin(),
+            Command::CloseNewTwin => self.close_new_twin(),
+            Command::ShowColmapLog(dataset) => self.colmap_log = dataset,
             Command::ShowChangeMaps(on) => {
                 if let Some(t) = &mut self.timeline {
                     t.show_change_maps = on;

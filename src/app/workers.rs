@@ -131,6 +131,14 @@ pub fn dialog(kind: DialogKind, start: Option<PathBuf>, results: Sender<WorkerRe
                 .set_title("The later survey's dataset folder")
                 .pick_folder()
                 .map(Command::ChooseSurveyDataset),
+            DialogKind::TwinPhotos => d
+                .set_title("The folder of photos to make the twin from")
+                .pick_folder()
+                .map(Command::ChooseTwinPhotos),
+            DialogKind::SurveyPhotos => d
+                .set_title("The later survey's folder of photos")
+                .pick_folder()
+                .map(Command::ChooseSurveyPhotos),
             DialogKind::SegmentModel => d
                 .set_title("The ONNX model to segment the photos with")
                 .add_filter("ONNX model", &["onnx"])

@@ -84,6 +84,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_features: args.max_features,
         sequential_overlap: args.overlap,
         control_points: args.control_points.clone(),
+        ..PoseOptions::default()
     };
     let bar = colmap_bar(args.quiet)?;
     let summary = sfm::pose_photos(&args.photos, &args.out, &options, &|p| show(&bar, p));

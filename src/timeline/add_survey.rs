@@ -13,7 +13,7 @@ use crate::timeline::align::Registration;
 use crate::timeline::segment_survey::NewSurvey;
 use crate::timeline::survey::AlignMode;
 use crate::timeline::twin::{TimelineError, Twin};
-use crate::train::job::{Job, JobError, JobOptions, Progress};
+use crate::train::job::{Job, JobContext, JobError, JobOptions, Progress};
 
 /// A survey to add.
 #[derive(Clone, Debug, PartialEq)]
@@ -192,24 +192,34 @@ pub fn add_survey_job(
     options: JobOptions,
 ) -> Job<(Twin, Option<AddedSurvey>)> {
     Job::spawn("add-survey", options, move |ctx| {
-        if let Some(with) = &survey.segment {
-            ctx.log(format!(
-                "segmenting survey {} with {}",
-                survey.name,
-                with.model.display()
-            ));
-        }
-        let added = add_new_survey(&mut twin, &survey, &mut |step| {
-            let progress = match step {
-                AddStep::Segment { done, total } => Progress::counted("segment", done, total, 0),
-                AddStep::Commit => Progress::counted("add", 0, 1, 0),
-            };
-            ctx.progress(progress);
-            !ctx.should_stop()
-        })
-        .map_err(JobError::other)?;
+        let added = add_in_job(ctx, &mut twin, &survey)?;
         Ok((twin, added))
     })
+}
+
+/// [`add_new_survey`] inside a job (`add_survey_job`, and after COLMAP registered the photos,
+/// `from_photos`): its steps as the job's progress, the job's cancel as the answer.
+pub fn add_in_job(
+    ctx: &mut JobContext,
+    twin: &mut Twin,
+    survey: &SurveyToAdd,
+) -> Result<Option<AddedSurvey>, JobError> {
+    if let Some(with) = &survey.segment {
+        ctx.log(format!(
+            "segmenting survey {} with {}",
+            survey.name,
+            with.model.display()
+        ));
+    }
+    add_new_survey(twin, survey, &mut |step| {
+        let progress = match step {
+            AddStep::Segment { done, total } => Progress::counted("segment", done, total, 0),
+            AddStep::Commit => Progress::counted("add", 0, 1, 0),
+        };
+        ctx.progress(progress);
+        !ctx.should_stop()
+    })
+    .map_err(JobError::other)
 }
 
 /// The mask and probability files of the segmented classes in a dataset before a run, so that a

@@ -12,6 +12,7 @@ pub mod changes;
 pub mod components;
 pub mod detect_survey;
 pub mod earlier;
+pub mod from_photos;
 pub mod georeference;
 pub mod lock;
 pub mod project_paths;

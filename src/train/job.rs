@@ -4,6 +4,7 @@
 //! cancel sent the other way. The app and the CLI are clients of this; no algorithm lives here.
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -146,6 +147,9 @@ pub struct JobContext<'a> {
     last_snapshot: Option<Instant>,
     paused_since: Option<Instant>,
     cancelled: bool,
+    /// Set by `Job::cancel` (and a dropped handle) at once, for work blocked where it cannot
+    /// call `should_stop`: an external program it waits on (COLMAP) polls it instead.
+    cancel_flag: Arc<AtomicBool>,
     /// The progress kept as a training history since `keep_history` (a job that writes its own
     /// record, as an update's commit does, keeps it with the model).
     history: std::cell::RefCell<Option<(Instant, crate::train::history::History)>>,
@@ -174,6 +178,7 @@ impl<'a> JobContext<'a> {
     fn new<R: 'a>(
         events: &'a Sender<JobEvent<R>>,
         control: &'a Receiver<Control>,
+        cancel_flag: Arc<AtomicBool>,
         options: &JobOptions,
     ) -> JobContext<'a> {
         JobContext {
@@ -183,6 +188,7 @@ impl<'a> JobContext<'a> {
             last_snapshot: None,
             paused_since: None,
             cancelled: false,
+            cancel_flag,
             history: std::cell::RefCell::new(None),
         }
     }
@@ -234,6 +240,12 @@ impl<'a> JobContext<'a> {
         (self.send)(Update::Snapshot(splats));
     }
 
+    /// A flag that turns true as soon as the job is cancelled, readable from any thread (pause
+    /// does not reach it): for work that waits on something other than this context.
+    pub fn cancel_flag(&self) -> Arc<AtomicBool> {
+        self.cancel_flag.clone()
+    }
+
     /// Applies pending control messages, blocking while paused. True once the job was cancelled
     /// (or its client is gone while paused): the work should stop at the next safe point.
     pub fn should_stop(&mut self) -> bool {
@@ -266,6 +278,8 @@ impl<'a> JobContext<'a> {
 pub struct Job<R> {
     events: Receiver<JobEvent<R>>,
     control: Sender<Control>,
+    /// `JobContext::cancel_flag`.
+    cancelled: Arc<AtomicBool>,
     worker: Option<JoinHandle<()>>,
 }
 
@@ -278,6 +292,8 @@ impl<R: Send + 'static> Job<R> {
     {
         let (event_tx, events) = crossbeam_channel::unbounded();
         let (control, control_rx) = crossbeam_channel::unbounded();
+        let cancelled = Arc::new(AtomicBool::new(false));
+        let cancel_flag = cancelled.clone();
         let worker = std::thread::Builder::new()
             .name(format!("damage-twin-{name}"))
             .spawn(move || {
@@ -285,7 +301,8 @@ impl<R: Send + 'static> Job<R> {
                     priority::lower_current_thread_priority();
                 }
                 let body = || {
-                    let mut context = JobContext::new(&event_tx, &control_rx, &options);
+                    let mut context =
+                        JobContext::new(&event_tx, &control_rx, cancel_flag, &options);
                     work(&mut context)
                 };
                 // Always inside a pool of our own, even at the default size: started from this
@@ -313,6 +330,7 @@ impl<R: Send + 'static> Job<R> {
             Ok(handle) => Job {
                 events,
                 control,
+                cancelled,
                 worker: Some(handle),
             },
             Err(e) => {
@@ -324,6 +342,7 @@ impl<R: Send + 'static> Job<R> {
                 Job {
                     events: rx,
                     control,
+                    cancelled,
                     worker: None,
                 }
             }
@@ -344,6 +363,7 @@ impl<R: Send + 'static> Job<R> {
     }
 
     pub fn cancel(&self) {
+        self.cancelled.store(true, Ordering::Relaxed);
         let _ = self.control.send(Control::Cancel);
     }
 
@@ -380,6 +400,7 @@ impl<R: Send + 'static> Job<R> {
 impl<R> Drop for Job<R> {
     fn drop(&mut self) {
         if let Some(worker) = self.worker.take() {
+            self.cancelled.store(true, Ordering::Relaxed);
             let _ = self.control.send(Control::Cancel);
             let _ = worker.join();
         }
@@ -433,6 +454,27 @@ mod tests {
             job.wait().is_ok(),
             "a cancelled job still returns what it did"
         );
+    }
+
+    #[test]
+    fn cancel_sets_the_flag_that_blocked_work_polls() {
+        let (started_tx, started) = crossbeam_channel::bounded(1);
+        let job = Job::spawn("test", JobOptions::headless(Some(1)), move |ctx| {
+            let flag = ctx.cancel_flag();
+            let _ = started_tx.send(());
+            // Work that never calls `should_stop` (waiting on a program) sees the flag alone.
+            let start = Instant::now();
+            while !flag.load(Ordering::Relaxed) {
+                if start.elapsed() > Duration::from_secs(10) {
+                    return Err(JobError::Invalid("the cancel never arrived".into()));
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            Ok(())
+        });
+        started.recv().unwrap();
+        job.cancel();
+        job.wait().unwrap();
     }
 
     #[test]

@@ -1,9 +1,12 @@
 //! The "Add survey…" dialog: a later survey's dataset folder (picked with a file dialog or typed),
 //! its name, date and alignment, and "Segment with…" an ONNX model (classes, threshold), the
-//! choices `twin add-survey` offers. While the survey is added, its progress and a cancel button;
+//! choices `twin add-survey` offers. From photos ("Add survey from photos…"): the photos and where
+//! COLMAP's registered dataset goes instead, placed by that registration. While the survey is
+//! added, its progress (COLMAP's stages) and a cancel button, and the COLMAP log one click away;
 //! why it was not added, in red. Reads the state, queues commands.
 
 use crate::app::commands::{Command, DialogKind};
+use crate::app::panels::colmap_log::colmap_progress;
 use crate::app::state::{AppState, TimelineJob, TimelineWork};
 use crate::app::survey_form::AddSurveyForm;
 use crate::timeline::survey::AlignMode;
@@ -23,7 +26,11 @@ impl AddSurveyPanel {
             .filter(|j| matches!(j.work, TimelineWork::AddSurvey(_)));
         let mut edited = form.clone();
         let mut open = true;
-        egui::Window::new("Add survey")
+        let title = match form.from_photos {
+            true => "Add survey from photos",
+            false => "Add survey",
+        };
+        egui::Window::new(title)
             .open(&mut open)
             .collapsible(false)
             .resizable(false)
@@ -35,7 +42,7 @@ impl AddSurveyPanel {
                 }
                 ui.separator();
                 match running {
-                    Some(job) => progress(ui, job, commands),
+                    Some(job) => progress(ui, job, form, commands),
                     None => {
                         ui.horizontal(|ui| {
                             if ui
@@ -51,6 +58,7 @@ impl AddSurveyPanel {
                             if ui.button("Close").clicked() {
                                 commands.push(Command::CloseAddSurvey);
                             }
+                            colmap_log_button(ui, form, commands);
                         });
                     }
                 }
@@ -70,18 +78,40 @@ fn fields(ui: &mut egui::Ui, form: &mut AddSurveyForm, commands: &mut Vec<Comman
         .num_columns(2)
         .spacing([8.0, 6.0])
         .show(ui, |ui| {
-            ui.label("Dataset folder");
-            ui.horizontal(|ui| {
+            if form.from_photos {
+                ui.label("Photos");
+                ui.horizontal(|ui| {
+                    ui.add(
+                        egui::TextEdit::singleline(&mut form.photos)
+                            .hint_text("the later survey's photos")
+                            .desired_width(280.0),
+                    );
+                    if ui.button("Choose…").clicked() {
+                        commands.push(Command::ShowDialog(DialogKind::SurveyPhotos));
+                    }
+                });
+                ui.end_row();
+                ui.label("Registered dataset");
                 ui.add(
                     egui::TextEdit::singleline(&mut form.dataset)
-                        .hint_text("photos, poses and (optionally) masks")
+                        .hint_text("a new folder")
                         .desired_width(280.0),
                 );
-                if ui.button("Choose…").clicked() {
-                    commands.push(Command::ShowDialog(DialogKind::SurveyDataset));
-                }
-            });
-            ui.end_row();
+                ui.end_row();
+            } else {
+                ui.label("Dataset folder");
+                ui.horizontal(|ui| {
+                    ui.add(
+                        egui::TextEdit::singleline(&mut form.dataset)
+                            .hint_text("photos, poses and (optionally) masks")
+                            .desired_width(280.0),
+                    );
+                    if ui.button("Choose…").clicked() {
+                        commands.push(Command::ShowDialog(DialogKind::SurveyDataset));
+                    }
+                });
+                ui.end_row();
+            }
             ui.label("Survey name");
             ui.add(egui::TextEdit::singleline(&mut form.name).desired_width(200.0));
             ui.end_row();
@@ -93,6 +123,12 @@ fn fields(ui: &mut egui::Ui, form: &mut AddSurveyForm, commands: &mut Vec<Comman
             );
             ui.end_row();
             ui.label("Alignment");
+            if form.from_photos {
+                ui.label("registered by COLMAP into the twin's posed survey")
+                    .on_hover_text(align_hint(AlignMode::Colmap));
+                ui.end_row();
+                return;
+            }
             egui::ComboBox::from_id_salt("add-survey-align")
                 .selected_text(form.align.name())
                 .show_ui(ui, |ui| {
@@ -155,24 +191,32 @@ fn align_hint(align: AlignMode) -> &'static str {
     }
 }
 
-/// The add's progress and its cancel button.
-fn progress(ui: &mut egui::Ui, job: &TimelineJob, commands: &mut Vec<Command>) {
+/// The add's progress (COLMAP's stages first, from photos) and its cancel button.
+fn progress(
+    ui: &mut egui::Ui,
+    job: &TimelineJob,
+    form: &AddSurveyForm,
+    commands: &mut Vec<Command>,
+) {
     ui.horizontal(|ui| {
-        let (fraction, text) = match &job.progress {
-            Some(p) if p.phase == "segment" => (
-                p.step as f32 / p.total.max(1) as f32,
-                format!("segmenting photo {}/{}", p.step, p.total),
-            ),
-            Some(_) => (1.0, "adding the survey to the project".to_string()),
-            None => (0.0, "starting…".to_string()),
-        };
-        ui.add(
-            egui::ProgressBar::new(fraction)
-                .text(text)
-                .desired_width(320.0),
-        );
+        colmap_progress(ui, job.progress.as_ref());
         if ui.button("Cancel").clicked() {
             commands.push(Command::CancelTimelineJob);
         }
+        colmap_log_button(ui, form, commands);
     });
+}
+
+/// "COLMAP log" for a survey from photos: the log of the run writing its dataset.
+fn colmap_log_button(ui: &mut egui::Ui, form: &AddSurveyForm, commands: &mut Vec<Command>) {
+    let dataset = form.dataset.trim();
+    if form.from_photos
+        && !dataset.is_empty()
+        && ui
+            .button("COLMAP log")
+            .on_hover_text("What COLMAP printed registering the photos")
+            .clicked()
+    {
+        commands.push(Command::ShowColmapLog(Some(dataset.into())));
+    }
 }

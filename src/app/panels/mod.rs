@@ -4,7 +4,9 @@
 
 pub mod add_survey;
 pub mod charts;
+pub mod colmap_log;
 pub mod log;
+pub mod new_twin;
 pub mod project;
 pub mod regions;
 pub mod selection;
@@ -15,7 +17,9 @@ pub mod view;
 
 pub use add_survey::AddSurveyPanel;
 pub use charts::ChartsPanel;
+pub use colmap_log::ColmapLogPanel;
 pub use log::LogPanel;
+pub use new_twin::NewTwinPanel;
 pub use project::ProjectPanel;
 pub use regions::RegionsPanel;
 pub use selection::SelectionPanel;

@@ -1,10 +1,12 @@
 //! Project and surveys: open a dataset / project / model (dialogs; drag-and-drop is handled by the
 //! app), recent files, save and export, and the survey views (clicking one snaps the viewport
-//! to it). Reads the state, queues commands.
+//! to it), the twin's georeference and its surveys' COLMAP registrations, "New twin from
+//! photos…". Reads the state, queues commands.
 
 use crate::app::commands::{Command, DialogKind};
-use crate::app::state::AppState;
+use crate::app::state::{AppState, ProjectRecords};
 use crate::scene::Dataset;
+use crate::scene::sfm::GeorefSource;
 
 #[derive(Default)]
 pub struct ProjectPanel;
@@ -21,6 +23,9 @@ impl ProjectPanel {
         ui.label(format!("Source: {}", scene.source.display()));
         if let Some(dir) = &scene.project_dir {
             ui.label(format!("Twin: {}", dir.display()));
+        }
+        if let Some(records) = state.timeline.as_ref().and_then(|t| t.records.as_ref()) {
+            frame_records(ui, records);
         }
         let Some(dataset) = &scene.dataset else {
             return;
@@ -60,6 +65,15 @@ fn file_buttons(ui: &mut egui::Ui, state: &AppState, commands: &mut Vec<Command>
             .clicked()
         {
             commands.push(Command::ShowDialog(DialogKind::OpenFile));
+        }
+        if ui
+            .button("New twin from photos…")
+            .on_hover_text(
+                "Pose a folder of photos with COLMAP (as `damage-twin pose`) and make a twin                  project of them",
+            )
+            .clicked()
+        {
+            commands.push(Command::OpenNewTwin);
         }
     });
     if !state.settings.recent.is_empty() {
@@ -127,4 +141,46 @@ fn survey_views(
                     }
                 });
         });
+}
+
+/// The twin's georeference (source, origin, residual, the scale's trust) and the residual of
+/// each survey registered by COLMAP.
+fn frame_records(ui: &mut egui::Ui, records: &ProjectRecords) {
+    match &records.georeference {
+        Ok(Some(geo)) => {
+            let g = &geo.georeference;
+            let source = match g.source {
+                GeorefSource::Gps => "GPS",
+                GeorefSource::ControlPoints => "control points",
+                GeorefSource::LocalControlPoints => "control points (local frame)",
+            };
+            ui.label(format!("Georeference: {source} (survey {})", geo.survey))
+                .on_hover_text(geo.trust());
+            if g.source != GeorefSource::LocalControlPoints {
+                ui.label(format!(
+                    "Origin: {:.6}°, {:.6}°, {:.1} m",
+                    g.latitude, g.longitude, g.altitude
+                ));
+            }
+            ui.label(format!(
+                "Residual {:.2} m RMS over {} positions ({} rejected) · {:.4} m per unit · scale \
+                 ±{:.1} %",
+                g.rms_m,
+                g.used.len(),
+                g.rejected.len(),
+                geo.metres_per_unit(),
+                100.0 * g.scale_uncertainty
+            ))
+            .on_hover_text(geo.trust());
+        }
+        Ok(None) => {
+            ui.weak("Georeference: none (no GPS or control points: lengths in model units)");
+        }
+        Err(e) => {
+            ui.colored_label(ui.visuals().error_fg_color, format!("Georeference: {e}"));
+        }
+    }
+    for (survey, residual) in &records.registrations {
+        ui.label(format!("Registration of {survey}: {residual}"));
+    }
 }

@@ -62,6 +62,15 @@ impl TimelinePanel {
         {
             commands.push(Command::OpenAddSurvey);
         }
+        if ui
+            .button("Add survey from photos…")
+            .on_hover_text(
+                "A later survey's photos, registered by COLMAP into the twin's posed survey                  (as `twin add-survey --photos --align colmap`)",
+            )
+            .clicked()
+        {
+            commands.push(Command::OpenAddSurveyFromPhotos);
+        }
         ui.separator();
         let later = current > 0;
         if ui

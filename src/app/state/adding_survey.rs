@@ -2,15 +2,19 @@
 //! from its worker), the survey added by `timeline::add_survey`'s job on a worker, as `twin
 //! add-survey` adds it (segmented first when asked, committed under the project's lock, all or
 //! nothing), its progress and cancel in the timeline strip, and the new survey in the strip when
-//! it is done. The dialog stays open with the error line when the survey was not added.
+//! it is done. The dialog stays open with the error line when the survey was not added (until a
+//! field changes). "Add survey from photos…" is the same dialog and job with COLMAP's
+//! registration first (`timeline::from_photos`).
 
 use std::path::PathBuf;
 
 use super::saving::viewer_writer;
 use super::{AppState, TimelineJob, TimelineWork};
 use crate::app::survey_form::AddSurveyForm;
+use crate::scene::sfm::pose::PoseOptions;
 use crate::timeline::Twin;
 use crate::timeline::add_survey::{AddedSurvey, add_survey_job};
+use crate::timeline::from_photos::add_survey_from_photos_job;
 use crate::train::history::History;
 use crate::train::job::JobOptions;
 
@@ -26,21 +30,48 @@ impl AppState {
         }
     }
 
+    /// Opens the dialog for a survey from photos ("Add survey from photos…"); a dialog open for
+    /// a dataset starts afresh, as it asks for other fields.
+    pub(super) fn open_add_survey_from_photos(&mut self) {
+        let Some(timeline) = &self.timeline else {
+            self.log_line("open a twin project to add a survey to it");
+            return;
+        };
+        if !self.add_survey.as_ref().is_some_and(|f| f.from_photos) {
+            self.add_survey = Some(AddSurveyForm::for_project_from_photos(&timeline.twin));
+        }
+    }
+
+    /// The panel's edited fields; a change of any field clears the last refusal, which was about
+    /// the fields as they were.
     pub(super) fn edit_add_survey(&mut self, form: AddSurveyForm) {
-        if self.add_survey.is_some() {
-            self.add_survey = Some(form);
+        if let Some(old) = &mut self.add_survey {
+            let changed = !old.same_inputs(&form);
+            *old = form;
+            if changed {
+                old.error = None;
+            }
+        }
+    }
+
+    pub(super) fn choose_survey_photos(&mut self, folder: PathBuf) {
+        if let (Some(form), Some(timeline)) = (&mut self.add_survey, &self.timeline) {
+            form.choose_photos(&folder, &timeline.twin);
+            form.error = None;
         }
     }
 
     pub(super) fn choose_survey_dataset(&mut self, folder: PathBuf) {
         if let (Some(form), Some(timeline)) = (&mut self.add_survey, &self.timeline) {
             form.choose_dataset(&folder, &timeline.twin);
+            form.error = None;
         }
     }
 
     pub(super) fn choose_segment_model(&mut self, file: PathBuf) {
         if let Some(form) = &mut self.add_survey {
             form.model = file.display().to_string();
+            form.error = None;
         }
     }
 
@@ -54,7 +85,10 @@ impl AppState {
             self.log_line("open a twin project and its \"Add survey…\" dialog first");
             return;
         };
-        let request = match form.request(timeline.twin.project.settings.background) {
+        let request = form
+            .request(timeline.twin.project.settings.background)
+            .and_then(|r| Ok((r, form.photos_to_register()?)));
+        let (request, photos) = match request {
             Ok(request) => request,
             Err(problem) => {
                 form.error = Some(problem.clone());
@@ -64,14 +98,17 @@ impl AppState {
         };
         form.error = None;
         let name = request.name.clone();
-        let job = add_survey_job(
-            timeline.twin.clone().with_writer(viewer_writer(true)),
-            request,
-            JobOptions {
-                low_priority: true,
-                ..JobOptions::default()
-            },
-        );
+        let twin = timeline.twin.clone().with_writer(viewer_writer(true));
+        let options = JobOptions {
+            low_priority: true,
+            ..JobOptions::default()
+        };
+        let job = match photos {
+            Some(photos) => {
+                add_survey_from_photos_job(twin, photos, request, PoseOptions::default(), options)
+            }
+            None => add_survey_job(twin, request, options),
+        };
         timeline.job = Some(TimelineJob {
             work: TimelineWork::AddSurvey(job),
             survey: timeline.twin.project.surveys.len(),

@@ -93,6 +93,8 @@ pub struct TimelineView {
     pub show_change_maps: bool,
     /// Other processes writing the project, and its file's last change.
     pub watch: ProjectWatch,
+    /// Its georeference and registrations, for the project panel (read by `poll`).
+    pub records: Option<super::ProjectRecords>,
 }
 
 impl TimelineView {
@@ -109,6 +111,7 @@ impl TimelineView {
             pending_show: None,
             job: None,
             show_change_maps: false,
+            records: None,
         }
     }
 

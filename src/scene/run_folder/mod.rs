@@ -82,7 +82,7 @@ impl RunFolder {
         }
         // What killed runs on this target left (`clean_leftovers` for it alone).
         clean(&parent, Some(&name));
-        let staging = parent.join(format!(".{name}{STAGING_TAG}{}", std::process::id()));
+        let staging = staging_path(&parent, &name);
         if staging.exists() {
             fs::remove_dir_all(&staging).map_err(|e| SceneError::io(&staging, e))?;
         }
@@ -269,6 +269,12 @@ fn relink(from: &Path, to: &Path) -> io::Result<()> {
 #[cfg(not(unix))]
 fn relink(from: &Path, to: &Path) -> io::Result<()> {
     fs::copy(from, to).map(|_| ())
+}
+
+/// The staging folder this process's run on the target `parent/name` writes into while it runs
+/// (a viewer shows the log a running job writes there).
+pub fn staging_path(parent: &Path, name: &str) -> PathBuf {
+    parent.join(format!(".{name}{STAGING_TAG}{}", std::process::id()))
 }
 
 impl Drop for RunFolder {

@@ -7,6 +7,9 @@ use std::ffi::OsString;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 use crate::scene::SceneError;
 use crate::scene::sfm::SfmError;
@@ -18,10 +21,15 @@ pub const COLMAP_ENV: &str = "DAMAGE_TWIN_COLMAP";
 /// Lines of COLMAP's output quoted in a failure.
 const TAIL_LINES: usize = 6;
 
+/// How often a silent COLMAP (the mapper can print nothing for minutes) is checked for a cancel.
+const CANCEL_POLL: Duration = Duration::from_millis(100);
+
 /// The COLMAP program to run.
 #[derive(Clone, Debug)]
 pub struct Colmap {
     program: PathBuf,
+    /// Set by another thread to stop the run (`cancelled_by`).
+    cancel: Option<Arc<AtomicBool>>,
 }
 
 impl Colmap {
@@ -30,7 +38,10 @@ impl Colmap {
         if let Some(program) = std::env::var_os(COLMAP_ENV).filter(|p| !p.is_empty()) {
             let program = PathBuf::from(program);
             return if is_executable(&program) {
-                Ok(Colmap { program })
+                Ok(Colmap {
+                    program,
+                    cancel: None,
+                })
             } else {
                 Err(SfmError::EngineMissing {
                     program: program.display().to_string(),
@@ -41,10 +52,25 @@ impl Colmap {
         std::env::split_paths(&path)
             .map(|dir| dir.join("colmap"))
             .find(|p| is_executable(p))
-            .map(|program| Colmap { program })
+            .map(|program| Colmap {
+                program,
+                cancel: None,
+            })
             .ok_or_else(|| SfmError::EngineMissing {
                 program: "colmap".into(),
             })
+    }
+
+    /// The same program, stopped when `cancel` is set (another thread sets it): a running
+    /// command is killed and `run` returns `SfmError::Cancelled`, as does every later `run`.
+    pub fn cancelled_by(self, cancel: Option<Arc<AtomicBool>>) -> Colmap {
+        Colmap { cancel, ..self }
+    }
+
+    fn is_cancelled(&self) -> bool {
+        self.cancel
+            .as_ref()
+            .is_some_and(|c| c.load(Ordering::Relaxed))
     }
 
     pub fn program(&self) -> &Path {
@@ -72,7 +98,8 @@ impl Colmap {
 
     /// Runs `colmap <command> <args>`, appending a header and everything it prints to `log`,
     /// and calling `progress` for each line that reports progress (`photos`: the photo count).
-    /// A non-zero exit (or a signal) is `EngineFailed` with the command and the last lines.
+    /// A non-zero exit (or a signal) is `EngineFailed` with the command and the last lines; a
+    /// cancel kills COLMAP and is `Cancelled`.
     pub fn run(
         &self,
         command: &str,
@@ -86,6 +113,9 @@ impl Colmap {
             .chain(args.iter().map(|a| a.to_string_lossy().into_owned()))
             .collect::<Vec<_>>()
             .join(" ");
+        if self.is_cancelled() {
+            return Err(SfmError::Cancelled);
+        }
         let mut log_file = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
@@ -134,7 +164,22 @@ impl Colmap {
         .collect();
         drop(sender);
         let mut tail: VecDeque<String> = VecDeque::with_capacity(TAIL_LINES);
-        for line in lines {
+        loop {
+            let line = match lines.recv_timeout(CANCEL_POLL) {
+                Ok(line) => line,
+                Err(crossbeam_channel::RecvTimeoutError::Timeout) => {
+                    if self.is_cancelled() {
+                        let _ = child.kill();
+                        let _ = child.wait();
+                        // The readers end when the pipes close; a grandchild COLMAP started may
+                        // hold them a little longer, so they are not waited for.
+                        let _ = writeln!(log_file, "(cancelled: COLMAP was stopped)");
+                        return Err(SfmError::Cancelled);
+                    }
+                    continue;
+                }
+                Err(crossbeam_channel::RecvTimeoutError::Disconnected) => break,
+            };
             writeln!(log_file, "{line}").map_err(log_error)?;
             if let Some(p) = parse_line(&line, photos) {
                 progress(p);
@@ -176,4 +221,59 @@ fn is_executable(path: &Path) -> bool {
 #[cfg(not(unix))]
 fn is_executable(path: &Path) -> bool {
     path.is_file()
+}
+
+#[cfg(all(test, unix))]
+mod tests {
+    use super::*;
+
+    /// A `colmap` that prints one progress line and then waits silently, as the mapper does.
+    fn silent_colmap(dir: &Path) -> PathBuf {
+        use std::os::unix::fs::PermissionsExt;
+        let path = dir.join("colmap");
+        std::fs::write(
+            &path,
+            "#!/bin/sh\necho 'Processed file [1/2]'\nexec sleep 30\n",
+        )
+        .unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+        path
+    }
+
+    #[test]
+    fn a_cancel_stops_a_silent_colmap_at_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let cancel = Arc::new(AtomicBool::new(false));
+        let colmap = Colmap {
+            program: silent_colmap(dir.path()),
+            cancel: None,
+        }
+        .cancelled_by(Some(cancel.clone()));
+        let log = dir.path().join("colmap.log");
+        let setter = {
+            let cancel = cancel.clone();
+            std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(300));
+                cancel.store(true, Ordering::Relaxed);
+            })
+        };
+        let started = std::time::Instant::now();
+        let seen = std::sync::Mutex::new(Vec::new());
+        let result = colmap.run("mapper", &[], &log, 2, &|p| seen.lock().unwrap().push(p));
+        setter.join().unwrap();
+        assert!(matches!(result, Err(SfmError::Cancelled)), "{result:?}");
+        assert!(
+            started.elapsed() < Duration::from_secs(5),
+            "took {:?}",
+            started.elapsed()
+        );
+        assert_eq!(
+            seen.lock().unwrap().len(),
+            1,
+            "the progress before the cancel"
+        );
+        // Once cancelled, nothing more is started.
+        let again = colmap.run("mapper", &[], &log, 2, &|_| {});
+        assert!(matches!(again, Err(SfmError::Cancelled)), "{again:?}");
+    }
 }

@@ -22,6 +22,9 @@ pub enum SfmError {
         tail: String,
         log: PathBuf,
     },
+    /// The run was cancelled (`PoseOptions::cancel`): COLMAP stopped, nothing written.
+    #[error("cancelled: COLMAP was stopped and nothing was written")]
+    Cancelled,
     /// The inputs cannot make a dataset (too few photos, no overlap, a bad control point).
     #[error("{}: {message}", path.display())]
     Input { path: PathBuf, message: String },

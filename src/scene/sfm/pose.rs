@@ -20,6 +20,8 @@
 use std::ffi::OsString;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use glam::DVec3;
@@ -93,6 +95,9 @@ pub struct PoseOptions {
     pub sequential_overlap: usize,
     /// Surveyed control points (`control`): their fit replaces the GPS georeference.
     pub control_points: Option<PathBuf>,
+    /// Set by another thread (the app's Cancel) to stop the run: COLMAP is killed, nothing is
+    /// written, and the run returns `SfmError::Cancelled`.
+    pub cancel: Option<Arc<AtomicBool>>,
 }
 
 impl Default for PoseOptions {
@@ -103,6 +108,7 @@ impl Default for PoseOptions {
             max_features: 8192,
             sequential_overlap: 10,
             control_points: None,
+            cancel: None,
         }
     }
 }
@@ -151,7 +157,7 @@ pub fn pose_photos(
         // A malformed file fails now, not after COLMAP's minutes.
         read_control_points(csv)?;
     }
-    let colmap = Colmap::find()?;
+    let colmap = Colmap::find()?.cancelled_by(options.cancel.clone());
     let exif: Vec<PhotoExif> = files.iter().map(|f| read_photo_exif(f)).collect();
     let matching = options
         .matching

@@ -149,7 +149,7 @@ pub fn register_photos(
             ),
         ));
     }
-    let colmap = Colmap::find()?;
+    let colmap = Colmap::find()?.cancelled_by(options.cancel.clone());
     let exif: Vec<PhotoExif> = files.iter().map(|f| read_photo_exif(f)).collect();
     let mut warnings = Vec::new();
 

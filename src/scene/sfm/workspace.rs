@@ -52,6 +52,10 @@ pub(super) fn extract_args(
 /// A failure keeps COLMAP's log beside the target `out` (the staging folder is removed), named
 /// so that it is not mistaken for a dataset; an engine failure then names that copy.
 pub(super) fn keep_failed_log(log: &Path, out: &Path, error: SfmError) -> SfmError {
+    // A cancel leaves nothing, not even a log beside the target.
+    if matches!(error, SfmError::Cancelled) {
+        return error;
+    }
     let kept = failed_log_path(out);
     let copied = std::fs::copy(log, &kept).is_ok();
     match error {
