@@ -5,5 +5,6 @@
 pub mod budget;
 pub mod hierarchy;
 pub mod mask_noise;
+pub mod real;
 pub mod segment;
 pub mod stability;

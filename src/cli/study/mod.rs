@@ -4,6 +4,7 @@
 mod budget;
 mod hierarchy;
 mod mask_noise;
+mod real;
 mod segment;
 mod stability;
 
@@ -25,6 +26,10 @@ pub enum Study {
     /// within 2 px by scale and tile, seconds per megapixel) and on the demo building, alone and
     /// through a label-mode twin trained on them.
     Segment(segment::SegmentStudyArgs),
+    /// Real photos with stamped damage (issue 42): the crack model's per-photo errors, the
+    /// label-mode twin, its fine-tune, the model's errors the twin corrects, change detection
+    /// against survey 2 and the measured quantities, all against the stamped truth.
+    Real(real::RealStudyArgs),
 }
 
 pub fn run(study: Study) -> anyhow::Result<()> {
@@ -34,6 +39,7 @@ pub fn run(study: Study) -> anyhow::Result<()> {
         Study::Budget(args) => budget::run(args),
         Study::Stability(args) => stability::run(args),
         Study::Segment(args) => segment::run(args),
+        Study::Real(args) => real::run(args),
     }
 }
 
