@@ -170,6 +170,9 @@ pub struct RealStudy {
     /// The twin on the stamped truth masks.
     pub truth_twin: TwinFigures,
     pub refinement: Option<Refinement>,
+    /// Why there is no refinement when one was asked for (the refinement's refusal).
+    #[serde(default)]
+    pub refinement_skipped: Option<String>,
     pub segmented_twin: SegmentedTwin,
     /// Survey 2 against the survey-1 twin (refined when there is a refinement): new damage per
     /// class after the default cleaning, against `truth/new-damage`.

@@ -28,7 +28,7 @@ use crate::studies::real::rows::{
 use crate::studies::segment::demo::segment_cracks_into;
 use crate::timeline::changes::{DetectConfig, OLD_DAMAGE_THRESHOLD, detect};
 use crate::timeline::detect_survey::DEFAULT_BAND_PX;
-use crate::train::job::JobOptions;
+use crate::train::job::{JobError, JobOptions};
 use crate::train::run::train;
 
 /// The photos' own size: the segmenter's and the refinement's resolution.
@@ -88,17 +88,26 @@ pub fn run_real(
     });
 
     // Refinement: fine-tune at the photos' size, both scored there on the held-out views.
+    let mut refinement_skipped = None;
     let (refinement, survey1_model) = if config.fine_iterations > 0 {
-        let (refinement, refined) =
-            refine_twin(&dataset, &run, &source, &truth_model, config, threads)?;
-        on_line(format!(
-            "fine-tune, {} steps in {:.0} s: held-out IoU at the photos' size {} → {}",
-            config.fine_iterations,
-            refinement.seconds,
-            ious(&refinement.coarse_heldout),
-            ious(&refinement.refined_heldout)
-        ));
-        (Some(refinement), refined)
+        match refine_twin(&dataset, &run, &source, &truth_model, config, threads)? {
+            Ok((refinement, refined)) => {
+                on_line(format!(
+                    "fine-tune, {} steps in {:.0} s: held-out IoU at the photos' size {} → {}",
+                    config.fine_iterations,
+                    refinement.seconds,
+                    ious(&refinement.coarse_heldout),
+                    ious(&refinement.refined_heldout)
+                ));
+                (Some(refinement), refined)
+            }
+            // A twin with nothing to refine is a figure of this capture, not a failed study.
+            Err(reason) => {
+                on_line(format!("no fine-tune: {reason}"));
+                refinement_skipped = Some(reason);
+                (None, truth_model)
+            }
+        }
     } else {
         (None, truth_model)
     };
@@ -197,6 +206,7 @@ pub fn run_real(
         segmenter_seconds,
         truth_twin,
         refinement,
+        refinement_skipped,
         segmented_twin,
         change,
         quantities,
@@ -242,7 +252,8 @@ fn train_label_twin(
 }
 
 /// The hierarchical refinement (selection, hulls, fine-tune inside them) at the photos' size;
-/// the coarse and the refined twin scored there on the held-out views.
+/// the coarse and the refined twin scored there on the held-out views. `Ok(Err(reason))` when
+/// the refinement refuses the twin (nothing selected).
 fn refine_twin(
     dataset: &Dataset,
     run: &RunConfig,
@@ -250,7 +261,7 @@ fn refine_twin(
     coarse: &Splats,
     config: &RealStudyConfig,
     threads: Option<usize>,
-) -> Result<(Refinement, Splats), String> {
+) -> Result<Result<(Refinement, Splats), String>, String> {
     let refine_config = RefineConfig {
         select: SelectConfig {
             mode: TrainMode::Label,
@@ -272,8 +283,13 @@ fn refine_twin(
         refine_config,
         JobOptions::headless(threads),
     )
-    .wait()
-    .map_err(|e| format!("fine-tune: {e}"))?;
+    .wait();
+    let outcome = match outcome {
+        Ok(outcome) => outcome,
+        // The refinement refuses a twin it cannot refine (no damage Gaussians selected).
+        Err(JobError::Invalid(reason)) => return Ok(Err(reason)),
+        Err(e) => return Err(format!("fine-tune: {e}")),
+    };
     let seconds = started.elapsed().as_secs_f64();
     let prepared = prepare_run(dataset, run).map_err(|e| e.to_string())?;
     let heldout = load_reference_views(dataset, source, &prepared.heldout_indices, PHOTO_SCALE)
@@ -287,7 +303,7 @@ fn refine_twin(
         refined_heldout: score(&outcome.splats),
         seconds,
     };
-    Ok((refinement, Arc::unwrap_or_clone(outcome.splats)))
+    Ok(Ok((refinement, Arc::unwrap_or_clone(outcome.splats))))
 }
 
 /// The twin trained on the crack model's masks, and the model's masks, against the truth at the
