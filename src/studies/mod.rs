@@ -5,6 +5,7 @@
 pub mod budget;
 pub mod hierarchy;
 pub mod mask_noise;
+pub mod real;
 pub mod segment;
 pub mod stability;
 pub mod update;

@@ -4,6 +4,7 @@
 mod budget;
 mod hierarchy;
 mod mask_noise;
+mod real;
 mod segment;
 mod stability;
 mod update;
@@ -29,6 +30,10 @@ pub enum Study {
     /// Survey updates run with different settings (`twin update`), from their metrics: held-out
     /// IoU, hull coverage and survey 1's look against wall time, on one chart.
     Update(update::UpdateStudyArgs),
+    /// Real photos with stamped damage (issue 42): the crack model's per-photo errors, the
+    /// label-mode twin, its fine-tune, the model's errors the twin corrects, change detection
+    /// against survey 2 and the measured quantities, all against the stamped truth.
+    Real(real::RealStudyArgs),
 }
 
 pub fn run(study: Study) -> anyhow::Result<()> {
@@ -39,6 +44,7 @@ pub fn run(study: Study) -> anyhow::Result<()> {
         Study::Stability(args) => stability::run(args),
         Study::Segment(args) => segment::run(args),
         Study::Update(args) => update::run(args),
+        Study::Real(args) => real::run(args),
     }
 }
 

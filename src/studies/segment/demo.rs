@@ -19,8 +19,8 @@ use crate::scene::masks::count_masks;
 use crate::scene::open::OpenOptions;
 use crate::scene::{DamageClass, Dataset, ImageScale, MaskFolder};
 use crate::segment::{
-    PhotoSettings, Preprocess, SegmentModel, SegmentSettings, Tiling, dataset_photos,
-    segment_photos,
+    PhotoSettings, Preprocess, SegmentModel, SegmentSettings, SegmentSummary, Tiling,
+    dataset_photos, segment_photos,
 };
 use crate::studies::segment::crack_sets::write_overlay;
 use crate::studies::segment::rows::{DemoResult, SegmentStudyConfig};
@@ -61,25 +61,7 @@ pub fn run_demo(
     // The photos through the model, into a folder of their own: the survey's own masks/ (the
     // synthetic truth) stay untouched and unused for training.
     let segmented = work.join("segmented");
-    let settings = SegmentSettings {
-        classes: vec![Some(DamageClass::Crack)],
-        photo: PhotoSettings {
-            preprocess: Preprocess::default(),
-            scale: ImageScale::Factor(1),
-            tiling: Tiling::default(),
-        },
-        threshold: config.threshold,
-        overwrite: true,
-        background: [0.0; 3],
-    };
-    let summary = segment_photos(
-        model,
-        &segmented,
-        &dataset_photos(&dataset),
-        &settings,
-        &mut |_, _| true,
-    )
-    .map_err(|e| e.to_string())?;
+    let summary = segment_cracks_into(model, &dataset, &segmented, config.threshold)?;
     on_line(format!(
         "segmented {} photos: {:.2} % of pixels marked crack",
         summary.photos,
@@ -209,6 +191,35 @@ pub fn run_demo(
         result.twin_heldout_iou
     ));
     Ok(result)
+}
+
+/// Runs `model` (one crack channel) on every photo of `dataset` at the photo's size and writes
+/// `folder/masks/crack/` and `folder/probabilities/crack/`, replacing what is there.
+pub fn segment_cracks_into(
+    model: &SegmentModel,
+    dataset: &Dataset,
+    folder: &Path,
+    threshold: f32,
+) -> Result<SegmentSummary, String> {
+    let settings = SegmentSettings {
+        classes: vec![Some(DamageClass::Crack)],
+        photo: PhotoSettings {
+            preprocess: Preprocess::default(),
+            scale: ImageScale::Factor(1),
+            tiling: Tiling::default(),
+        },
+        threshold,
+        overwrite: true,
+        background: [0.0; 3],
+    };
+    segment_photos(
+        model,
+        folder,
+        &dataset_photos(dataset),
+        &settings,
+        &mut |_, _| true,
+    )
+    .map_err(|e| e.to_string())
 }
 
 /// A crack figure of `scores` (0 when no view had a crack reference).
