@@ -46,6 +46,9 @@ pub struct RefineConfig {
     pub neighbour_geometry_rate: Option<f32>,
     /// The renderer the refinement trains on.
     pub backend: crate::train::backend_choice::Backend,
+    /// Timed rounds (one step per view of the refinement's and of full-image steps each) of
+    /// the cost comparison `RefineReport::step_costs`.
+    pub cost_rounds: u32,
 }
 
 impl Default for RefineConfig {
@@ -76,6 +79,7 @@ impl Default for RefineConfig {
             max_scale_growth: None,
             neighbour_geometry_rate: None,
             backend: Default::default(),
+            cost_rounds: 2,
         }
     }
 }
