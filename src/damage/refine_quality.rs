@@ -129,10 +129,18 @@ fn region_counts(region: &crate::scene::Mask) -> (f64, f64, f64) {
     let ts = crate::raster::TILE_SIZE as usize;
     let rows = crate::raster::pixel_rows(&region.data, region.width, region.height);
     let pixels: u32 = rows.iter().map(|r| r.count_ones()).sum();
-    let tiles = rows
+    let tiles_x = crate::raster::tile_grid(region.width, region.height).0 as usize;
+    let (w, h) = (region.width as usize, region.height as usize);
+    // The tiles' pixels inside the image (edge tiles are cut by its border).
+    let tile_pixels: usize = rows
         .chunks_exact(ts)
-        .filter(|tile| tile.iter().any(|&r| r != 0))
-        .count();
+        .enumerate()
+        .filter(|(_, tile)| tile.iter().any(|&r| r != 0))
+        .map(|(t, _)| {
+            let (x0, y0) = ((t % tiles_x) * ts, (t / tiles_x) * ts);
+            (w - x0).min(ts) * (h - y0).min(ts)
+        })
+        .sum();
     let mut weights = Vec::new();
     crate::train::loss::mask_weights(region, &mut weights);
     let read =
@@ -140,7 +148,7 @@ fn region_counts(region: &crate::scene::Mask) -> (f64, f64, f64) {
     let whole = region.width as usize * region.height as usize;
     (
         f64::from(pixels),
-        (tiles * ts * ts) as f64,
+        tile_pixels as f64,
         read.min(whole) as f64,
     )
 }
