@@ -208,4 +208,23 @@ fn refinement_trains_the_selection_and_freezes_the_rest() {
     // Both qualities were measured on the held-out views.
     assert!(report.before.psnr.is_some() && report.after.psnr_outside_hulls.is_some());
     assert!(report.ms_per_refine_step > 0.0 && report.ms_per_full_step > 0.0);
+    // The interleaved cost comparison: both kinds timed the same steps, and the counts say the
+    // refinement blends only hull pixels, fewer than their tiles hold and than the image has.
+    let costs = &report.step_costs;
+    assert_eq!(costs.steps, costs.views as u32 * 2, "{costs:?}");
+    assert!(
+        costs.refine_ms.total > 0.0 && costs.full_ms.total > 0.0,
+        "{costs:?}"
+    );
+    assert!(costs.share > 0.0 && costs.share.is_finite(), "{costs:?}");
+    assert!(
+        0.0 < costs.region_pixels
+            && costs.region_pixels < costs.region_tile_pixels
+            && costs.region_tile_pixels <= costs.full_pixels,
+        "{costs:?}"
+    );
+    assert!(
+        costs.ssim_pixels > 0.0 && costs.ssim_pixels <= costs.full_pixels,
+        "{costs:?}"
+    );
 }

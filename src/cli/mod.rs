@@ -3,6 +3,7 @@
 
 mod args;
 mod bench;
+mod bench_refine;
 mod bench_render;
 mod cluster;
 mod compact;

@@ -12,8 +12,8 @@ use serde::Serialize;
 use crate::damage::TrainMode;
 use crate::damage::evaluate::DamageReadout;
 pub use crate::damage::refine_config::RefineConfig;
-pub use crate::damage::refine_quality::Quality;
-use crate::damage::refine_quality::{full_step_ms, hull_coverage, quality};
+pub use crate::damage::refine_quality::{Quality, StepCosts};
+use crate::damage::refine_quality::{hull_coverage, quality, step_costs};
 use crate::damage::refine_selection::{given_selection, region_labels, select_by_masks};
 use crate::damage::select::Selection;
 use crate::damage::setup::apply_mode;
@@ -70,6 +70,8 @@ pub struct RefineReport {
     pub ms_per_full_step: f64,
     /// That full-image step by stage.
     pub stage_ms_per_full_step: crate::train::trainer::StageTimes,
+    /// The refinement step against the full-image one, timed interleaved, with pixel counts.
+    pub step_costs: StepCosts,
     pub before: Quality,
     pub after: Quality,
     pub views: Vec<ViewHulls>,
@@ -228,8 +230,17 @@ pub fn refine_from(
         }
         spec.geometry_rate = Some(rates);
     }
-    // A full-image step of the same run, for the cost comparison: a few steps on uncropped views.
-    let (full_step_ms, full_stages) = full_step_ms(&focus, model, &spec, &trained, &targets, mode)?;
+    // The cost comparison: the run's step against a full-image step, interleaved.
+    let costs = step_costs(
+        &focus,
+        model,
+        &spec,
+        &trained,
+        &crops,
+        &targets,
+        mode,
+        config.cost_rounds,
+    )?;
     let setup = TrainSetup {
         spec,
         splats: model.clone(),
@@ -275,8 +286,9 @@ pub fn refine_from(
         gaussians_before: baseline.len(),
         gaussians_after: refined.len(),
         ms_per_refine_step: outcome.timings.total * 1000.0 / outcome.steps.max(1) as f64,
-        ms_per_full_step: full_step_ms,
-        stage_ms_per_full_step: full_stages,
+        ms_per_full_step: costs.full_ms.total,
+        stage_ms_per_full_step: costs.full_ms.clone(),
+        step_costs: costs,
         stage_ms_per_step: outcome.timings.per_step_ms(outcome.steps),
         before,
         after,

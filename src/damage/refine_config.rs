@@ -51,6 +51,9 @@ pub struct RefineConfig {
     /// A study's oracle: hulls from the dataset's truth masks instead of from the selection
     /// (`truth_hulls`; refused without truth masks).
     pub hulls_from_truth: bool,
+    /// Timed rounds (one step per view of the refinement's and of full-image steps each) of
+    /// the cost comparison `RefineReport::step_costs`.
+    pub cost_rounds: u32,
 }
 
 impl Default for RefineConfig {
@@ -83,6 +86,7 @@ impl Default for RefineConfig {
             backend: Default::default(),
             stop_when_flat: None,
             hulls_from_truth: false,
+            cost_rounds: 2,
         }
     }
 }

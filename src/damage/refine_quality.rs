@@ -3,7 +3,6 @@
 //! the hull crops are measured against.
 
 use std::collections::BTreeMap;
-use std::time::Instant;
 
 use glam::Vec3;
 use serde::Serialize;
@@ -31,36 +30,128 @@ pub struct Quality {
     pub psnr: Option<f64>,
 }
 
-/// Milliseconds per step of the same run on uncropped views (up to four of the trained ones),
-/// made into targets by `targets` as the crops were, in all and by stage.
-pub(super) fn full_step_ms(
+/// What a refinement step costs against a full-image step of the same model, timed
+/// interleaved in one process (rounds of one step per view of each), so the host's load falls
+/// on both alike and their ratio holds on a busy machine; with the pixel counts of the two,
+/// which no load changes.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct StepCosts {
+    /// The views both were timed on (up to four of the trained ones).
+    pub views: usize,
+    /// Timed steps of each.
+    pub steps: u32,
+    /// Refinement steps (hull crops, focused) and full-image steps, by stage.
+    pub refine_ms: StageTimes,
+    pub full_ms: StageTimes,
+    /// `refine_ms.total / full_ms.total`.
+    pub share: f64,
+    /// Per step, on average over the views: the pixels a full-image step renders, the loss
+    /// region's pixels (all a refinement step blends), the pixels of the tiles holding them,
+    /// and the pixels the region's SSIM reads (its pieces with their margins).
+    pub full_pixels: f64,
+    pub region_pixels: f64,
+    pub region_tile_pixels: f64,
+    pub ssim_pixels: f64,
+}
+
+/// [`StepCosts`] of the run `spec` on the crops `crops` of the views `trained` (in the same
+/// order), against the same views uncropped (made into targets by `targets` as the crops were).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn step_costs(
     focus: &Focus,
     model: &Splats,
     spec: &TrainSpec,
     trained: &[&ViewHulls],
+    crops: &[TrainView],
     targets: &(dyn Fn(&mut [TrainView]) + Sync),
     mode: TrainMode,
-) -> Result<(f64, StageTimes), JobError> {
-    const STEPS: u32 = 8;
-    let indices: Vec<usize> = trained.iter().take(4).map(|v| v.index).collect();
+    rounds: u32,
+) -> Result<StepCosts, JobError> {
+    const VIEWS: usize = 4;
+    let indices: Vec<usize> = trained.iter().take(VIEWS).map(|v| v.index).collect();
     let views = focus.load(&indices, mode.uses_masks(), targets)?;
+    let crops: Vec<TrainView> = crops.iter().take(indices.len()).cloned().collect();
+    let mut costs = StepCosts {
+        views: indices.len(),
+        ..StepCosts::default()
+    };
+    for (full, crop) in views.iter().zip(&crops) {
+        costs.full_pixels += f64::from(full.image.width) * f64::from(full.image.height);
+        if let Some(region) = &crop.region {
+            let counts = region_counts(region);
+            costs.region_pixels += counts.0;
+            costs.region_tile_pixels += counts.1;
+            costs.ssim_pixels += counts.2;
+        }
+    }
+    let per_view = 1.0 / indices.len().max(1) as f64;
+    costs.full_pixels *= per_view;
+    costs.region_pixels *= per_view;
+    costs.region_tile_pixels *= per_view;
+    costs.ssim_pixels *= per_view;
+    // One warm-up round (buffers sized, each view's frozen cache filled), then the timed ones.
+    let steps = indices.len() as u32 * (rounds + 1);
     let timing_spec = TrainSpec {
-        iterations: STEPS,
+        iterations: steps,
         densify: DensifyPolicy::Off,
         ..spec.clone()
     };
-    let mut trainer = Trainer::new(timing_spec, model.clone(), views)?;
-    // One warm-up step sizes the buffers.
-    trainer.step();
-    let warm_up = trainer.timings().clone();
-    let t = Instant::now();
-    while !trainer.is_done() {
-        trainer.step();
+    // The same spec for both (the full-image step keeps the run's trainable set, as the
+    // figures before this comparison did): only the crops and their regions differ.
+    let mut refine = Trainer::new(timing_spec.clone(), model.clone(), crops)?;
+    let mut full = Trainer::new(timing_spec, model.clone(), views)?;
+    let (mut refine_warm, mut full_warm) = (StageTimes::default(), StageTimes::default());
+    for round in 0..=rounds {
+        for _ in 0..indices.len() {
+            refine.step();
+        }
+        for _ in 0..indices.len() {
+            full.step();
+        }
+        if round == 0 {
+            refine_warm = refine.timings().clone();
+            full_warm = full.timings().clone();
+        }
     }
-    let ms = t.elapsed().as_secs_f64() * 1000.0 / (STEPS - 1) as f64;
-    let mut stages = trainer.timings().clone();
-    stages.subtract(&warm_up);
-    Ok((ms, stages.per_step_ms(STEPS - 1)))
+    let timed = indices.len() as u32 * rounds;
+    let mut refine_times = refine.timings().clone();
+    refine_times.subtract(&refine_warm);
+    let mut full_times = full.timings().clone();
+    full_times.subtract(&full_warm);
+    costs.steps = timed;
+    costs.refine_ms = refine_times.per_step_ms(timed);
+    costs.full_ms = full_times.per_step_ms(timed);
+    costs.share = costs.refine_ms.total / costs.full_ms.total.max(f64::MIN_POSITIVE);
+    Ok(costs)
+}
+
+/// A loss region's pixels, the pixels of its tiles, and those its SSIM reads.
+fn region_counts(region: &crate::scene::Mask) -> (f64, f64, f64) {
+    let ts = crate::raster::TILE_SIZE as usize;
+    let rows = crate::raster::pixel_rows(&region.data, region.width, region.height);
+    let pixels: u32 = rows.iter().map(|r| r.count_ones()).sum();
+    let tiles_x = crate::raster::tile_grid(region.width, region.height).0 as usize;
+    let (w, h) = (region.width as usize, region.height as usize);
+    // The tiles' pixels inside the image (edge tiles are cut by its border).
+    let tile_pixels: usize = rows
+        .chunks_exact(ts)
+        .enumerate()
+        .filter(|(_, tile)| tile.iter().any(|&r| r != 0))
+        .map(|(t, _)| {
+            let (x0, y0) = ((t % tiles_x) * ts, (t / tiles_x) * ts);
+            (w - x0).min(ts) * (h - y0).min(ts)
+        })
+        .sum();
+    let mut weights = Vec::new();
+    crate::train::loss::mask_weights(region, &mut weights);
+    let read =
+        crate::train::ssim::RegionSsim::new().pixels_read(&weights, region.width, region.height);
+    let whole = region.width as usize * region.height as usize;
+    (
+        f64::from(pixels),
+        tile_pixels as f64,
+        read.min(whole) as f64,
+    )
 }
 
 /// Per damage class, the share of the held-out views' reference pixels that lie inside the hulls

@@ -40,6 +40,13 @@ pub trait RasterBackend: Send {
         let _ = tiles;
     }
 
+    /// Renders only these pixels of the active tiles in the next frames (None: all); see
+    /// `Rasterizer::set_active_pixels`. Rendering every pixel is always correct, only slower,
+    /// so a backend may ignore this.
+    fn set_active_pixels(&mut self, rows: Option<&[u16]>) {
+        let _ = rows;
+    }
+
     /// The focus of the next frames of a focused run (None: plain frames); see
     /// `Rasterizer::set_focus`. Rendering every frame whole is always correct, only slower, so
     /// a backend may ignore this.
@@ -95,6 +102,10 @@ impl RasterBackend for Rasterizer {
 
     fn set_active_tiles(&mut self, tiles: Option<&[bool]>) {
         Rasterizer::set_active_tiles(self, tiles);
+    }
+
+    fn set_active_pixels(&mut self, rows: Option<&[u16]>) {
+        Rasterizer::set_active_pixels(self, rows);
     }
 
     fn set_focus(&mut self, focus: Option<super::FrameFocus<'_>>) {

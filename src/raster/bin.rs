@@ -143,6 +143,10 @@ pub(crate) struct TileBins {
     /// Per tile: rendered or not (None: every tile). Set by `Rasterizer::set_active_tiles`;
     /// applied only when it has one entry per tile of the frame.
     pub active: Option<Vec<bool>>,
+    /// Per tile its 16 rows' rendered pixels, bit `x` of entry `tile * 16 + y` for pixel
+    /// `(x, y)` of the tile (None: every pixel). Set by `Rasterizer::set_active_pixels`;
+    /// applied only when it has 16 entries per tile of the frame.
+    pub active_pixels: Option<Vec<u16>>,
 }
 
 impl TileBins {
@@ -160,6 +164,14 @@ impl TileBins {
             (self.width as usize).saturating_sub(ox).min(TS),
             (self.height as usize).saturating_sub(oy).min(TS),
         )
+    }
+
+    /// The rows of `tile`'s rendered pixels (`active_pixels`), when they apply to this frame.
+    pub fn tile_pixel_rows(&self, tile: usize) -> Option<&[u16]> {
+        self.active_pixels
+            .as_deref()
+            .filter(|rows| rows.len() == self.tile_count() * TS)
+            .map(|rows| &rows[tile * TS..(tile + 1) * TS])
     }
 
     /// `per_isect` values per intersection of `data`, split into one slice per tile (a few

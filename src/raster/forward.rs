@@ -191,7 +191,7 @@ fn rasterize_tile_impl<F: Arith>(
     let (ox, oy) = ((tx * TS) as f32, (ty * TS) as f32);
     state.fill(0.0);
     let (t_buf, rest) = state.split_at_mut(TILE_PIXELS);
-    start_transmittance(t_buf, bins.tile_extent(tile));
+    start_transmittance(t_buf, bins.tile_extent(tile), bins.tile_pixel_rows(tile));
     let (rgb, rest) = rest.split_at_mut(3 * TILE_PIXELS);
     let (depth_buf, label_buf) = rest.split_at_mut(TILE_PIXELS);
     let (r_buf, gb) = rgb.split_at_mut(TILE_PIXELS);
@@ -217,6 +217,13 @@ fn rasterize_tile_impl<F: Arith>(
         let sp = splats[n];
         let label_values = &isect_labels[n * labels..(n + 1) * labels];
         let todo = masks[n] & live;
+        if todo == 0 {
+            // Only over finished segments (or pixels outside the rendered ones): nothing to
+            // blend or replay.
+            masks[n] = 0;
+            n += 1;
+            continue;
+        }
         let terms = RowTerms::new(&sp, ox);
         // Two passes over the segments: first every falloff (independent of the tile state, so
         // the out-of-order core overlaps their exp chains), then the blends.
@@ -304,13 +311,21 @@ fn rasterize_tile_impl<F: Arith>(
 }
 
 /// Fills a tile's transmittance for the blend: 1 for its pixels in the image (`columns × rows`
-/// of them, [`TileBins::tile_extent`]), finished (negated) for those past the image's right or
-/// bottom edge, so they neither blend nor keep the tile alive. Forward and backward start alike.
+/// of them, [`TileBins::tile_extent`]) and among the rendered pixels (`pixel_rows`, bit `x` of
+/// row `y`; None: all), finished (negated) for the others (past the image's right or bottom
+/// edge, or outside a loss region), so they neither blend nor keep the tile alive: a segment
+/// with no live pixel is never visited. Forward and backward start alike.
 #[inline(always)]
-pub(crate) fn start_transmittance(t: &mut [f32], (columns, rows): (usize, usize)) {
+pub(crate) fn start_transmittance(
+    t: &mut [f32],
+    (columns, rows): (usize, usize),
+    pixel_rows: Option<&[u16]>,
+) {
     for (y, row) in t.chunks_exact_mut(TS).enumerate() {
+        let bits = pixel_rows.map_or(u16::MAX, |r| r[y]);
         for (x, t) in row.iter_mut().enumerate() {
-            *t = if x < columns && y < rows { 1.0 } else { -1.0 };
+            let on = x < columns && y < rows && (bits >> x) & 1 == 1;
+            *t = if on { 1.0 } else { -1.0 };
         }
     }
 }

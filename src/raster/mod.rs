@@ -364,6 +364,22 @@ impl Rasterizer {
         }
     }
 
+    /// Renders only these pixels of the active tiles (None: all), as [`pixel_rows`] packs a
+    /// mask: the others come out as background, blend nothing and take no part in the
+    /// backward, so a refinement pays per hull pixel, not per 16×16 tile. Every rendered
+    /// pixel and every gradient from them is bit-identical to a frame without the mask. Rows
+    /// of the wrong length for a frame are ignored.
+    pub fn set_active_pixels(&mut self, rows: Option<&[u16]>) {
+        match rows {
+            Some(r) => {
+                let active = self.bins.active_pixels.get_or_insert_with(Vec::new);
+                active.clear();
+                active.extend_from_slice(r);
+            }
+            None => self.bins.active_pixels = None,
+        }
+    }
+
     pub fn projected(&self) -> &Projected {
         &self.projected
     }
@@ -473,6 +489,28 @@ impl Rasterizer {
             &mut self.gauss_grads,
         );
     }
+}
+
+/// A `width × height` row-major mask (non-zero: rendered) packed as
+/// [`Rasterizer::set_active_pixels`] reads it: per tile (`ty * tiles_x + tx`) 16 rows, bit `x`
+/// of row `y` for the tile's pixel `(x, y)`; pixels past the image are left out.
+pub fn pixel_rows(mask: &[u8], width: u32, height: u32) -> Vec<u16> {
+    let ts = TILE_SIZE as usize;
+    let (tiles_x, tiles_y) = tile_grid(width, height);
+    let (w, tiles_x) = (width as usize, tiles_x as usize);
+    let mut rows = vec![0u16; tiles_x * tiles_y as usize * ts];
+    if w == 0 {
+        return rows;
+    }
+    for (y, row) in mask.chunks_exact(w).take(height as usize).enumerate() {
+        let (ty, iy) = (y / ts, y % ts);
+        for (x, &m) in row.iter().enumerate() {
+            if m != 0 {
+                rows[(ty * tiles_x + x / ts) * ts + iy] |= 1 << (x % ts);
+            }
+        }
+    }
+    rows
 }
 
 /// Convenience: renders one frame with a fresh [`Rasterizer`].

@@ -112,7 +112,11 @@ fn backward_tile_impl<F: Arith, const HAS_LABELS: bool>(
     let ty = tile / bins.tiles_x as usize;
     let (ox, oy) = ((tx * TS) as f32, (ty * TS) as f32);
     let mut t_buf = [1.0f32; TILE_PIXELS];
-    start_transmittance(&mut t_buf, bins.tile_extent(tile));
+    start_transmittance(
+        &mut t_buf,
+        bins.tile_extent(tile),
+        bins.tile_pixel_rows(tile),
+    );
     // Running `sum_{j <= i} w_j (c_j · g)` per pixel: the suffix `S_i · g` is total - prefix.
     let mut prefix = [0.0f32; TILE_PIXELS];
     // Finished pixels keep their transmittance negated, as in the forward.

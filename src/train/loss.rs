@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use super::ssim::{SsimWorkspace, ssim_with_grad};
+use super::ssim::{RegionSsim, SsimWorkspace, ssim_with_grad};
 
 /// Weight of the D-SSIM term (3DGS `lambda_dssim`).
 pub const SSIM_LAMBDA: f32 = 0.2;
@@ -13,6 +13,8 @@ pub const SSIM_LAMBDA: f32 = 0.2;
 #[derive(Default)]
 pub struct LossWorkspace {
     ssim: SsimWorkspace,
+    /// The SSIM of a sparse region, on pieces around its tiles.
+    region_ssim: RegionSsim,
     /// Region-blended render `m·x + (1-m)·t`.
     blended: Vec<f32>,
     /// Per-pixel weights `a_p = m_p / (3·Σm)`.
@@ -92,15 +94,23 @@ pub fn photometric_loss(
             (&ws.blended[..], Some(&ws.weights[..]))
         }
     };
-    let ssim = ssim_with_grad(
-        &mut ws.ssim,
-        ssim_input,
-        target,
-        width,
-        height,
-        weights,
-        Some(&mut ws.v_ssim),
-    );
+    // A region's SSIM on the pieces around its tiles (`ssim::region`), unless they would
+    // cover the whole image anyway.
+    let pieces = weights.and_then(|a| {
+        ws.region_ssim
+            .ssim_with_grad(ssim_input, target, width, height, a, &mut ws.v_ssim)
+    });
+    let ssim = pieces.unwrap_or_else(|| {
+        ssim_with_grad(
+            &mut ws.ssim,
+            ssim_input,
+            target,
+            width,
+            height,
+            weights,
+            Some(&mut ws.v_ssim),
+        )
+    });
 
     // L1 and the combined gradient, row by row.
     let v_ssim = &ws.v_ssim;

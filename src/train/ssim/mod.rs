@@ -71,18 +71,24 @@ struct BandScratch {
 }
 
 impl BandScratch {
-    fn new(width: usize, band_rows: usize) -> BandScratch {
+    /// Sizes every buffer for `width` and `band_rows`, all zero (the padding columns are never
+    /// written afterwards), keeping the allocations: a workspace that serves regions of many
+    /// sizes (`region.rs`) allocates only when one is larger than any before.
+    fn reset(&mut self, width: usize, band_rows: usize) {
         let pw = width + 2 * RADIUS;
-        BandScratch {
-            fwd_padded: vec![0.0; FWD * pw],
-            fwd_ring: vec![0.0; FWD * SSIM_WINDOW * width],
-            stats: vec![0.0; FWD * width],
-            ssim_row: vec![0.0; width],
-            bwd_padded: vec![0.0; BWD * pw],
-            bwd_ring: vec![0.0; BWD * SSIM_WINDOW * width],
-            bwd_rows: vec![0.0; BWD * width],
-            sums: vec![0.0; 3 * band_rows],
+        fn zeros(v: &mut Vec<f32>, len: usize) {
+            v.clear();
+            v.resize(len, 0.0);
         }
+        zeros(&mut self.fwd_padded, FWD * pw);
+        zeros(&mut self.fwd_ring, FWD * SSIM_WINDOW * width);
+        zeros(&mut self.stats, FWD * width);
+        zeros(&mut self.ssim_row, width);
+        zeros(&mut self.bwd_padded, BWD * pw);
+        zeros(&mut self.bwd_ring, BWD * SSIM_WINDOW * width);
+        zeros(&mut self.bwd_rows, BWD * width);
+        self.sums.clear();
+        self.sums.resize(3 * band_rows, 0.0);
     }
 }
 
@@ -118,9 +124,13 @@ impl SsimWorkspace {
         self.height = height;
         self.band_rows = band_rows;
         self.kernel = gaussian_window();
-        // Fresh zeroed buffers: the padding columns are never written afterwards.
-        self.bands = vec![BandScratch::new(width, band_rows); bands];
-        self.row_sums = vec![0.0; 3 * height];
+        // Zeroed buffers: the padding columns are never written afterwards.
+        self.bands.resize_with(bands, BandScratch::default);
+        for band in &mut self.bands {
+            band.reset(width, band_rows);
+        }
+        self.row_sums.clear();
+        self.row_sums.resize(3 * height, 0.0);
     }
 }
 
@@ -561,5 +571,7 @@ fn ssim_in_bands(
     ws.row_sums.iter().sum()
 }
 
+mod region;
+pub use region::RegionSsim;
 #[cfg(test)]
 mod tests;

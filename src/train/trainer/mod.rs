@@ -96,6 +96,9 @@ pub struct Trainer {
     regions: Vec<Option<Vec<f32>>>,
     /// Per view with a loss region, the tiles that region needs rendered (see `region_tiles`).
     tiles: Vec<Option<Vec<bool>>>,
+    /// Per view with a loss region, its pixels packed for `Rasterizer::set_active_pixels`: the
+    /// only ones rendered inside those tiles.
+    pixels: Vec<Option<Vec<u16>>>,
     /// The renderer (the CPU rasterizer unless `with_backend` chose another).
     rasterizer: Box<dyn RasterBackend>,
     out: RenderOutput,
@@ -237,6 +240,14 @@ impl Trainer {
             .iter()
             .map(|v| v.region.as_ref().map(region_tiles))
             .collect();
+        let pixels = views
+            .iter()
+            .map(|v| {
+                v.region
+                    .as_ref()
+                    .map(|m| crate::raster::pixel_rows(&m.data, m.width, m.height))
+            })
+            .collect();
         let grads = SplatGrads::zeros(&splats);
         let checkpoint = Checkpoint {
             splats: splats.clone(),
@@ -251,6 +262,7 @@ impl Trainer {
             last_loss: f32::NAN,
             regions,
             tiles,
+            pixels,
             rasterizer: backend,
             out: RenderOutput::default(),
             grads,
@@ -401,6 +413,8 @@ impl Trainer {
         self.rasterizer
             .set_active_tiles(self.tiles[view_index].as_deref());
         self.rasterizer
+            .set_active_pixels(self.pixels[view_index].as_deref());
+        self.rasterizer
             .set_focus(self.frozen_cache.focus(view_index));
         self.rasterizer.forward(
             &self.splats,
@@ -538,6 +552,7 @@ impl Trainer {
     pub fn evaluate(&mut self, views: &[TrainView]) -> EvalScores {
         self.sync();
         self.rasterizer.set_active_tiles(None);
+        self.rasterizer.set_active_pixels(None);
         self.rasterizer.set_focus(None);
         let settings = self.step_settings(self.steps_done.max(1));
         evaluate_with(
