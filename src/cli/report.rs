@@ -21,7 +21,6 @@ use damage_twin::scene::atomic::write_atomic;
 use damage_twin::scene::files::{is_present, read_regular};
 use damage_twin::scene::limits::MAX_PROJECT_JSON_BYTES;
 use damage_twin::scene::run_folder::remove_dead_temp_files;
-use damage_twin::synth::quantities::Quantities;
 use damage_twin::timeline::quantities::survey_quantities;
 use damage_twin::timeline::twin::{HISTORY_FILE, today};
 
@@ -86,16 +85,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let truth_file = dataset.root.join("truth").join("quantities.json");
         if is_present(&truth_file) {
             let bytes = read_regular(&truth_file, MAX_PROJECT_JSON_BYTES)?;
-            let q: Quantities = serde_json::from_slice(&bytes)
+            let totals = TruthTotals::from_quantities_json(&bytes)
                 .with_context(|| format!("{}: not a quantities file", truth_file.display()))?;
-            truth.insert(
-                s.survey.clone(),
-                TruthTotals {
-                    crack_length_m: f64::from(q.totals.crack_length_m),
-                    spalling_area_m2: f64::from(q.totals.spalling_area_m2),
-                    rebar_length_m: f64::from(q.totals.rebar_length_m),
-                },
-            );
+            truth.insert(s.survey.clone(), totals);
         }
         let Some(splats) = twin.load_model(&s.survey)? else {
             continue;

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::report::georeference::{ReportGeoreference, placement_html};
 use crate::report::project_runs::ProjectRun;
@@ -35,12 +35,26 @@ pub struct ReportSettings {
     pub plane_slab_m: f64,
 }
 
-/// A survey's true totals (synthetic surveys' `truth/quantities.json`), to check against.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+/// A survey's true totals (`truth/quantities.json` as `synth` or `stamp` writes it), to check
+/// against.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TruthTotals {
     pub crack_length_m: f64,
     pub spalling_area_m2: f64,
     pub rebar_length_m: f64,
+}
+
+impl TruthTotals {
+    /// The totals of a `truth/quantities.json`. Only the three totals the report shows are read,
+    /// so a generated building's file and a stamped capture's (whose other fields differ) both
+    /// serve.
+    pub fn from_quantities_json(bytes: &[u8]) -> Result<Self, serde_json::Error> {
+        #[derive(Deserialize)]
+        struct QuantitiesFile {
+            totals: TruthTotals,
+        }
+        serde_json::from_slice::<QuantitiesFile>(bytes).map(|file| file.totals)
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -440,7 +454,76 @@ pub fn base64(bytes: &[u8]) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::base64;
+    use super::{TruthTotals, base64};
+
+    /// The report read only `synth`'s layout and refused a stamped capture's quantities file
+    /// ("missing field crack_polyline_length_m"); both layouts give their totals.
+    #[test]
+    fn truth_totals_are_read_from_synths_and_stamps_quantities_files() {
+        use crate::synth::quantities as synth_q;
+        use crate::synth::stamp::quantities as stamp_q;
+        let synth_file = synth_q::Quantities {
+            survey: 1,
+            frame: "world".into(),
+            spalling_area_includes_rebar: false,
+            totals: synth_q::Totals {
+                crack_length_m: 2.5,
+                spalling_area_m2: 0.75,
+                rebar_length_m: 1.25,
+                ..synth_q::Totals::default()
+            },
+            regions: Vec::new(),
+        };
+        let stamp_file = stamp_q::Quantities {
+            survey: 2,
+            frame: "model".into(),
+            metres_per_unit: 15.35,
+            spalling_area_includes_rebar: false,
+            totals: stamp_q::Totals {
+                crack_length_m: 3.5,
+                spalling_area_m2: 0.5,
+                rebar_length_m: 0.25,
+                rebar_area_m2: 0.01,
+                cracks: 1,
+                spalls: 1,
+                rebar: 1,
+                new_regions: 0,
+            },
+            regions: Vec::new(),
+        };
+        let read = |value: &dyn erased_json::Json| {
+            TruthTotals::from_quantities_json(value.json().as_bytes()).expect("totals")
+        };
+        assert_eq!(
+            read(&synth_file),
+            TruthTotals {
+                crack_length_m: 2.5,
+                spalling_area_m2: 0.75,
+                rebar_length_m: 1.25,
+            }
+        );
+        assert_eq!(
+            read(&stamp_file),
+            TruthTotals {
+                crack_length_m: 3.5,
+                spalling_area_m2: 0.5,
+                rebar_length_m: 0.25,
+            }
+        );
+        assert!(TruthTotals::from_quantities_json(b"{\"survey\": 1}").is_err());
+    }
+
+    /// Serialises either file type through one closure.
+    mod erased_json {
+        pub trait Json {
+            fn json(&self) -> String;
+        }
+        impl<T: serde::Serialize> Json for T {
+            fn json(&self) -> String {
+                serde_json::to_string(self).expect("serialises")
+            }
+        }
+    }
 
     #[test]
     fn base64_matches_rfc_4648_vectors() {
