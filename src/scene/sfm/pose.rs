@@ -33,7 +33,7 @@ use crate::scene::sfm::SfmError;
 use crate::scene::sfm::control::{
     CONTROL_FIT_FILE, ControlFit, fit_control_points, read_control_points,
 };
-use crate::scene::sfm::engine::Colmap;
+use crate::scene::sfm::engine::{Colmap, Engine};
 use crate::scene::sfm::exif::{PhotoExif, read_photo_exif};
 use crate::scene::sfm::georef::{Georeference, fit_gps};
 use crate::scene::sfm::progress::{Progress, Stage};
@@ -93,6 +93,8 @@ pub struct PoseOptions {
     pub sequential_overlap: usize,
     /// Surveyed control points (`control`): their fit replaces the GPS georeference.
     pub control_points: Option<PathBuf>,
+    /// The engine; `None`: `Engine::default_choice()` (the one measured best, docs/POSE.md).
+    pub engine: Option<Engine>,
 }
 
 impl Default for PoseOptions {
@@ -103,7 +105,15 @@ impl Default for PoseOptions {
             max_features: 8192,
             sequential_overlap: 10,
             control_points: None,
+            engine: None,
         }
+    }
+}
+
+impl PoseOptions {
+    /// The engine to run: the one chosen, else the default.
+    pub fn engine(&self) -> Engine {
+        self.engine.unwrap_or_else(Engine::default_choice)
     }
 }
 
@@ -151,7 +161,7 @@ pub fn pose_photos(
         // A malformed file fails now, not after COLMAP's minutes.
         read_control_points(csv)?;
     }
-    let colmap = Colmap::find()?;
+    let mut colmap = Colmap::for_engine(options.engine())?;
     let exif: Vec<PhotoExif> = files.iter().map(|f| read_photo_exif(f)).collect();
     let matching = options
         .matching
@@ -173,6 +183,7 @@ pub fn pose_photos(
     for dir in [&work, &images] {
         std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
     }
+    colmap.prepare(&work)?;
     let log = run.path(LOG_FILE);
     let keep_log = |error: SfmError| keep_failed_log(&log, out, error);
     for file in &files {
@@ -200,7 +211,7 @@ pub fn pose_photos(
         &db,
         &images,
         options,
-        focal_prior(&files, &exif),
+        focal_prior(colmap.engine(), &files, &exif),
         masks.as_deref().filter(|_| ignore_masks),
     );
     let n = files.len();

@@ -149,7 +149,7 @@ pub fn register_photos(
             ),
         ));
     }
-    let colmap = Colmap::find()?;
+    let mut colmap = Colmap::for_engine(options.engine())?;
     let exif: Vec<PhotoExif> = files.iter().map(|f| read_photo_exif(f)).collect();
     let mut warnings = Vec::new();
 
@@ -159,6 +159,7 @@ pub fn register_photos(
     for dir in [&work, &images] {
         std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
     }
+    colmap.prepare(&work)?;
     let log = run.path(LOG_FILE);
     let keep_log = |error: SfmError| keep_failed_log(&log, out, error);
     let db = run.path(DATABASE_FILE);
@@ -213,7 +214,7 @@ pub fn register_photos(
         &db,
         &images,
         options,
-        focal_prior(&files, &exif),
+        focal_prior(colmap.engine(), &files, &exif),
         ignore_masks.map(PathBuf::as_path),
     );
     extract.extend(["--image_list_path".into(), new_list.into()]);
