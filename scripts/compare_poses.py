@@ -14,6 +14,8 @@ docs/POSE.md ("registered", "median rotation error", "median position error, % o
 - `--via MODEL2`: MODEL is first brought into MODEL2's frame through the `--fit` photos both
   share (the twin's `--align joint`), then MODEL2 to the reference through the `--fit` photos;
   errors on `--eval`. Without it the chain is MODEL to the reference directly.
+- `--rotation-fit`: the similarity's rotation from the cameras' orientations (their mean
+  offset), scale and shift from the centres; default: Umeyama on centres alone.
 - extent: the diagonal of the reference cameras' bounding box (`cameras`, lund), of its 3D
   points' (`points`), or a number (the demo building's diagonal: 16 × 9 × 9.6 m, 20.72).
 
@@ -63,13 +65,22 @@ def apply(sim, cams):
     return {n: (rc @ r.T, s * r @ c + t) for n, (rc, c) in cams.items()}
 
 
-def fit(cams, target, names):
+def fit(cams, target, names, rotations=False):
     shared = [n for n in names if n in cams and n in target]
     if len(shared) < 3:
         sys.exit(f"only {len(shared)} photos shared to fit a similarity on")
     src = np.array([cams[n][1] for n in shared])
     dst = np.array([target[n][1] for n in shared])
-    return umeyama(src, dst)
+    if not rotations:
+        return umeyama(src, dst)
+    # The rotation from the cameras' orientations (the chordal mean of R_ref^T R_model), then
+    # scale and shift from the centres: cameras along one street leave the roll about it to
+    # the centres' noise in a centre-only fit.
+    u, _, vt = np.linalg.svd(sum(target[n][0].T @ cams[n][0] for n in shared))
+    rotation = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
+    a, b = src - src.mean(0), dst - dst.mean(0)
+    scale = (b * (a @ rotation.T)).sum() / (a**2).sum()
+    return scale, rotation, dst.mean(0) - scale * rotation @ src.mean(0)
 
 
 def select(spec, universe):
@@ -91,6 +102,8 @@ def main():
     parser.add_argument("--eval")
     parser.add_argument("--via")
     parser.add_argument("--extent", default="cameras")
+    parser.add_argument("--rotation-fit", action="store_true",
+                        help="the similarity's rotation from the cameras' orientations")
     args = parser.parse_args()
 
     reference, ref_points = {}, []
@@ -105,10 +118,10 @@ def main():
 
     if args.via:
         via, _ = poses(args.via)
-        model = apply(fit(model, via, fit_names), model)
-        model = apply(fit(via, reference, fit_names), model)
+        model = apply(fit(model, via, fit_names, args.rotation_fit), model)
+        model = apply(fit(via, reference, fit_names, args.rotation_fit), model)
     else:
-        model = apply(fit(model, reference, fit_names), model)
+        model = apply(fit(model, reference, fit_names, args.rotation_fit), model)
 
     if args.extent not in ("cameras", "points"):
         extent = float(args.extent)

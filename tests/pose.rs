@@ -154,8 +154,7 @@ CALLS = __CALLS__
 class Opts:
     def __init__(self, **kw): self.__dict__.update(kw)
 def record(call, **kw):
-    with open(CALLS, "a") as f: f.write(json.dumps(dict(call=call, **kw)) + "
-")
+    with open(CALLS, "a") as f: f.write(json.dumps(dict(call=call, **kw)) + "\n")
 def ImageReaderOptions(): return Opts(camera_model="SIMPLE_RADIAL", camera_params="", mask_path=".")
 def FeatureExtractionOptions(): return Opts(num_threads=-1, sift=Opts(max_num_features=8192))
 def FeatureMatchingOptions(): return Opts(num_threads=-1)
