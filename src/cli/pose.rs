@@ -45,8 +45,9 @@ pub struct Args {
 #[derive(clap::Args, Debug, Clone, Copy)]
 pub struct EngineArg {
     /// The SfM engine: pycolmap (COLMAP 4 through `pip install pycolmap`, run by the shipped
-    /// script) or colmap (the `colmap` program, Debian's 3.8). Default: the one measured best
-    /// on lund (docs/POSE.md); `colmap` when DAMAGE_TWIN_COLMAP names a program.
+    /// script) or colmap (the `colmap` program, Debian's 3.8). Default: `colmap` when
+    /// DAMAGE_TWIN_COLMAP names a program; for `add-survey --photos` the engine that posed the
+    /// survey registered into; else the one measured best on lund (docs/POSE.md): pycolmap.
     #[arg(long, value_parser = parse_engine)]
     pub engine: Option<Engine>,
 }

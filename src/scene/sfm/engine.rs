@@ -42,11 +42,16 @@ impl Engine {
     /// The engine measured best on lund (docs/POSE.md), unless `$DAMAGE_TWIN_COLMAP` names a
     /// COLMAP program: then that program.
     pub fn default_choice() -> Engine {
-        if std::env::var_os(COLMAP_ENV).is_some_and(|p| !p.is_empty()) {
+        if Engine::colmap_named() {
             Engine::Colmap
         } else {
             MEASURED_DEFAULT
         }
+    }
+
+    /// Whether `$DAMAGE_TWIN_COLMAP` names a COLMAP program (then it is the engine meant).
+    pub fn colmap_named() -> bool {
+        std::env::var_os(COLMAP_ENV).is_some_and(|p| !p.is_empty())
     }
 
     pub fn name(self) -> &'static str {
