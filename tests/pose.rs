@@ -406,8 +406,10 @@ fn the_synthetic_building_is_posed_like_its_known_cameras() {
 }
 
 #[test]
-#[ignore = "runs COLMAP 4 through pycolmap (pip install pycolmap) on 18 lund photos: about a \
-            minute of CPU; run with --ignored"]
+#[ignore = "fails today: pycolmap registers 18 of 18, but this test's comparison through \
+            Dataset::open gives 141° / 3.6 % where scripts/compare_poses.py on the same kind of \
+            run gives 0.50° / 0.03 % (docs/POSE.md): the comparison is to be found; needs \
+            pip install pycolmap, a minute of CPU; run with --ignored"]
 fn the_pycolmap_engine_poses_lund_photos_like_the_shipped_model() {
     let Some(lund) = shared_data::path("opensfm_lund") else {
         return;
