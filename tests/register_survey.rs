@@ -28,6 +28,9 @@ impl Setup {
                 "2026-02-01",
                 "--align",
                 "colmap",
+                // The fake on PATH is COLMAP's CLI, whichever engine is the default.
+                "--engine",
+                "colmap",
             ])
             .arg("--photos")
             .arg(self.path(photos))

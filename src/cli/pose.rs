@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use damage_twin::scene::sfm::{self, Matching, PoseOptions, Progress, Stage};
+use damage_twin::scene::sfm::{self, Engine, Matching, PoseOptions, Progress, Stage};
 use indicatif::{ProgressBar, ProgressStyle};
 
 #[derive(clap::Args, Debug)]
@@ -34,9 +34,26 @@ pub struct Args {
     /// CPU threads COLMAP may use (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    #[command(flatten)]
+    pub engine: EngineArg,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// `--engine`, shared by `pose` and `twin add-survey --photos`.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct EngineArg {
+    /// The SfM engine: pycolmap (COLMAP 4 through `pip install pycolmap`, run by the shipped
+    /// script) or colmap (the `colmap` program, Debian's 3.8). Default: `colmap` when
+    /// DAMAGE_TWIN_COLMAP names a program; for `add-survey --photos` the engine that posed the
+    /// survey registered into; else the one measured best on lund (docs/POSE.md): pycolmap.
+    #[arg(long, value_parser = parse_engine)]
+    pub engine: Option<Engine>,
+}
+
+fn parse_engine(text: &str) -> Result<Engine, String> {
+    Engine::parse(text).ok_or_else(|| format!("{text:?}: expected pycolmap or colmap"))
 }
 
 fn parse_matching(text: &str) -> Result<Matching, String> {
@@ -84,6 +101,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_features: args.max_features,
         sequential_overlap: args.overlap,
         control_points: args.control_points.clone(),
+        engine: args.engine.engine,
         ..PoseOptions::default()
     };
     let bar = colmap_bar(args.quiet)?;

@@ -16,7 +16,7 @@ use damage_twin::timeline::add_survey::{SegmentWith, SurveyToAdd, add_survey_job
 use damage_twin::timeline::survey::AlignMode;
 
 use crate::cli::args::{JobArgs, LockArgs, drive, parse_survey_name};
-use crate::cli::pose::{colmap_bar, show};
+use crate::cli::pose::{EngineArg, colmap_bar, show};
 use crate::cli::segment::ModelArgs;
 
 #[derive(clap::Args, Debug)]
@@ -39,6 +39,8 @@ pub struct Args {
     /// The survey's photos (with --align colmap): --dataset is then the folder to write.
     #[arg(long)]
     pub photos: Option<PathBuf>,
+    #[command(flatten)]
+    pub engine: EngineArg,
     /// Segment the survey's photos with this ONNX model first (masks written into the dataset,
     /// never over masks already there); the model options are `segment`'s.
     #[arg(long)]
@@ -107,6 +109,7 @@ fn register_photos(twin: &Twin, args: &Args, photos: &std::path::Path) -> anyhow
     let (reference, _) = twin.colmap_reference()?;
     let options = PoseOptions {
         threads: args.job.threads.unwrap_or(PoseOptions::default().threads),
+        engine: args.engine.engine,
         ..PoseOptions::default()
     };
     let bar = colmap_bar(args.job.quiet)?;

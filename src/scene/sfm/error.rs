@@ -13,6 +13,11 @@ pub enum SfmError {
     )]
     EngineMissing { program: String },
     #[error(
+        "the pycolmap engine (COLMAP 4) is not available: {why}; install it with `pip install \
+         pycolmap`, or choose Debian's COLMAP with `--engine colmap`"
+    )]
+    PycolmapMissing { why: String },
+    #[error(
         "COLMAP failed ({status}) running `{command}`; its last lines: {tail} (full log: {})",
         log.display()
     )]

@@ -2,7 +2,8 @@
 //! driven, never re-implemented), and this module turns its output into a dataset the rest of the
 //! project opens, with metres and north from the photos' GPS or from surveyed control points.
 //!
-//! - `engine`: finding `colmap`, running one of its commands with the log kept and progress read
+//! - `engine`: the engine (COLMAP's CLI, or COLMAP 4 through pycolmap and the shipped script),
+//!   finding it, running one of its commands with the log kept and progress read
 //!   from its own output, failures reported with the command and its last lines.
 //! - `progress`: COLMAP's log lines as progress (stage, done, total).
 //! - `pose`: the pipeline (stage, extract, match, map, largest component, dataset, commit).
@@ -24,7 +25,7 @@ pub mod progress;
 pub mod register;
 pub mod workspace;
 
-pub use engine::Colmap;
+pub use engine::{Colmap, Engine};
 pub use error::SfmError;
 pub use georef::{GeorefSource, Georeference};
 pub use pose::{Matching, PoseOptions, PoseSummary, pose_photos};

@@ -35,7 +35,7 @@ use crate::scene::sfm::SfmError;
 use crate::scene::sfm::control::{
     CONTROL_FIT_FILE, ControlFit, fit_control_points, read_control_points,
 };
-use crate::scene::sfm::engine::Colmap;
+use crate::scene::sfm::engine::{Colmap, Engine};
 use crate::scene::sfm::exif::{PhotoExif, read_photo_exif};
 use crate::scene::sfm::georef::{Georeference, fit_gps};
 use crate::scene::sfm::progress::{Progress, Stage};
@@ -98,6 +98,8 @@ pub struct PoseOptions {
     /// Set by another thread (the app's Cancel) to stop the run: COLMAP is killed, nothing is
     /// written, and the run returns `SfmError::Cancelled`.
     pub cancel: Option<Arc<AtomicBool>>,
+    /// The engine; `None`: `Engine::default_choice()` (the one measured best, docs/POSE.md).
+    pub engine: Option<Engine>,
 }
 
 impl Default for PoseOptions {
@@ -109,7 +111,15 @@ impl Default for PoseOptions {
             sequential_overlap: 10,
             control_points: None,
             cancel: None,
+            engine: None,
         }
+    }
+}
+
+impl PoseOptions {
+    /// The engine to run: the one chosen, else the default.
+    pub fn engine(&self) -> Engine {
+        self.engine.unwrap_or_else(Engine::default_choice)
     }
 }
 
@@ -157,7 +167,7 @@ pub fn pose_photos(
         // A malformed file fails now, not after COLMAP's minutes.
         read_control_points(csv)?;
     }
-    let colmap = Colmap::find()?.cancelled_by(options.cancel.clone());
+    let mut colmap = Colmap::for_engine(options.engine())?.cancelled_by(options.cancel.clone());
     let exif: Vec<PhotoExif> = files.iter().map(|f| read_photo_exif(f)).collect();
     let matching = options
         .matching
@@ -179,6 +189,7 @@ pub fn pose_photos(
     for dir in [&work, &images] {
         std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
     }
+    colmap.prepare(&work)?;
     let log = run.path(LOG_FILE);
     let keep_log = |error: SfmError| keep_failed_log(&log, out, error);
     for file in &files {
@@ -206,7 +217,7 @@ pub fn pose_photos(
         &db,
         &images,
         options,
-        focal_prior(&files, &exif),
+        focal_prior(colmap.engine(), &files, &exif),
         masks.as_deref().filter(|_| ignore_masks),
     );
     let n = files.len();

@@ -4,9 +4,11 @@
 //!
 //! ```text
 //! Processed file [3/29]                 feature extraction
-//! Matching image [11/29]                sequential and spatial matching
+//! Matching image [11/29]                sequential and spatial matching (COLMAP 4: "Processing
+//!                                       image [11/29]")
 //! Matching block [1/2, 2/2]             exhaustive matching
 //! Matching block [1/3]                  a pair list (`matches_importer`)
+//! Processing block [1/2, 2/2]           COLMAP 4's exhaustive matching (and "[1/3]": a pair list)
 //! Registering image #12 (14)            mapping (COLMAP 4: "(num_reg_frames=14)")
 //! ```
 
@@ -49,7 +51,9 @@ pub fn parse_line(line: &str, photos: usize) -> Option<Progress> {
             total,
         });
     }
-    if let Some(rest) = after(line, "Matching image [") {
+    if let Some(rest) =
+        after(line, "Matching image [").or_else(|| after(line, "Processing image ["))
+    {
         let (done, total) = fraction(rest)?;
         return Some(Progress {
             stage: Stage::Match,
@@ -57,7 +61,9 @@ pub fn parse_line(line: &str, photos: usize) -> Option<Progress> {
             total,
         });
     }
-    if let Some(rest) = after(line, "Matching block [") {
+    if let Some(rest) =
+        after(line, "Matching block [").or_else(|| after(line, "Processing block ["))
+    {
         // "[i/n, j/m]": block (i, j) of n × m, row by row; "[i/n]": block i of a pair list
         // (`matches_importer`).
         let (i, n) = fraction(rest)?;
@@ -140,6 +146,14 @@ mod tests {
         assert_eq!(
             parse_line("Matching block [2/5] in 1.2s", 29),
             p(Stage::Match, 2, 5)
+        );
+        assert_eq!(
+            parse_line(&format!("{glog}Processing block [1/2, 2/2]"), 29),
+            p(Stage::Match, 2, 4)
+        );
+        assert_eq!(
+            parse_line(&format!("{glog}Processing image [4/29]"), 29),
+            p(Stage::Match, 4, 29)
         );
         assert_eq!(parse_line("Elapsed time: 0.123 [minutes]", 29), None);
         assert_eq!(parse_line("Processed file [30/29]", 29), None);

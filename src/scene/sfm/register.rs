@@ -35,10 +35,10 @@ use crate::scene::files::read_regular;
 use crate::scene::open::stem_of;
 use crate::scene::run_folder::RunFolder;
 use crate::scene::sfm::SfmError;
-use crate::scene::sfm::engine::Colmap;
+use crate::scene::sfm::engine::{Colmap, Engine};
 use crate::scene::sfm::exif::{PhotoExif, read_photo_exif};
 use crate::scene::sfm::georef::Georeference;
-use crate::scene::sfm::pose::{LOG_FILE, MAPPER_SETTINGS, PoseOptions};
+use crate::scene::sfm::pose::{LOG_FILE, MAPPER_SETTINGS, PoseOptions, SUMMARY_FILE};
 use crate::scene::sfm::progress::{Progress, Stage};
 use crate::scene::sfm::workspace::{
     check_target, copy_masks, extract_args, failed_log_path, file_name, focal_prior,
@@ -149,7 +149,12 @@ pub fn register_photos(
             ),
         ));
     }
-    let colmap = Colmap::find()?.cancelled_by(options.cancel.clone());
+    let engine = match options.engine {
+        Some(chosen) => chosen,
+        None if Engine::colmap_named() => Engine::Colmap,
+        None => engine_of(&reference).unwrap_or_else(Engine::default_choice),
+    };
+    let mut colmap = Colmap::for_engine(engine)?.cancelled_by(options.cancel.clone());
     let exif: Vec<PhotoExif> = files.iter().map(|f| read_photo_exif(f)).collect();
     let mut warnings = Vec::new();
 
@@ -159,6 +164,7 @@ pub fn register_photos(
     for dir in [&work, &images] {
         std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
     }
+    colmap.prepare(&work)?;
     let log = run.path(LOG_FILE);
     let keep_log = |error: SfmError| keep_failed_log(&log, out, error);
     let db = run.path(DATABASE_FILE);
@@ -213,7 +219,7 @@ pub fn register_photos(
         &db,
         &images,
         options,
-        focal_prior(&files, &exif),
+        focal_prior(colmap.engine(), &files, &exif),
         ignore_masks.map(PathBuf::as_path),
     );
     extract.extend(["--image_list_path".into(), new_list.into()]);
@@ -336,6 +342,22 @@ pub fn register_photos(
     write_atomic(&run.path(REGISTER_FILE), |w| w.write_all(json.as_bytes()))?;
     run.commit()?;
     Ok(summary)
+}
+
+/// The engine that made `dataset` (its `pose.json` or `register.json` names COLMAP's version):
+/// by default a later survey is registered by the same one, so a database is never read by
+/// another COLMAP than the one that wrote it. `None`: neither file says.
+fn engine_of(dataset: &Path) -> Option<Engine> {
+    [SUMMARY_FILE, REGISTER_FILE].iter().find_map(|file| {
+        let bytes = read_regular(&dataset.join(file), 16 << 20).ok()?;
+        let summary: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
+        let engine = summary.get("engine")?.as_str()?;
+        Some(if engine.contains("pycolmap") {
+            Engine::Pycolmap
+        } else {
+            Engine::Colmap
+        })
+    })
 }
 
 /// Registration thresholds tried in turn: COLMAP's defaults (30 inliers, a quarter of the

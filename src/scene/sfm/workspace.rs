@@ -12,6 +12,7 @@ use crate::scene::files::{EntryBudget, image_size, walk_files};
 use crate::scene::limits::MAX_LISTED_ENTRIES;
 use crate::scene::open::{list_images, stem_of};
 use crate::scene::sfm::SfmError;
+use crate::scene::sfm::engine::Engine;
 use crate::scene::sfm::exif::PhotoExif;
 use crate::scene::sfm::pose::PoseOptions;
 
@@ -78,8 +79,13 @@ pub(super) fn keep_failed_log(log: &Path, out: &Path, error: SfmError) -> SfmErr
 /// 35 mm-equivalent focal length (`f = f35 / 36 mm × the longer side`), when every photo has
 /// one size and the photos that state a focal length agree. COLMAP 3.8 does not read that tag
 /// by itself: on lund (no make or model in EXIF) it starts from 1024 px instead of 996 and
-/// splits the street in two components (docs/POSE.md).
-pub(super) fn focal_prior(files: &[PathBuf], exif: &[PhotoExif]) -> Option<String> {
+/// splits the street in two components (docs/POSE.md). COLMAP 4 reads the photos' EXIF focal
+/// length itself, and there the prior hurt: on lund with 995.6 px given it registered 2 of 29
+/// photos (docs/POSE.md), so the pycolmap engine gets none.
+pub(super) fn focal_prior(engine: Engine, files: &[PathBuf], exif: &[PhotoExif]) -> Option<String> {
+    if engine == Engine::Pycolmap {
+        return None;
+    }
     let mut focals: Vec<f64> = exif.iter().filter_map(|e| e.focal_35mm).collect();
     focals.sort_by(f64::total_cmp);
     let median = *focals.get(focals.len() / 2)?;
