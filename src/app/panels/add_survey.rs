@@ -7,6 +7,7 @@
 
 use crate::app::commands::{Command, DialogKind};
 use crate::app::panels::colmap_log::colmap_progress;
+use crate::app::panels::path_row;
 use crate::app::state::{AppState, TimelineJob, TimelineWork};
 use crate::app::survey_form::AddSurveyForm;
 use crate::timeline::survey::AlignMode;
@@ -79,38 +80,31 @@ fn fields(ui: &mut egui::Ui, form: &mut AddSurveyForm, commands: &mut Vec<Comman
         .spacing([8.0, 6.0])
         .show(ui, |ui| {
             if form.from_photos {
-                ui.label("Photos");
-                ui.horizontal(|ui| {
-                    ui.add(
-                        egui::TextEdit::singleline(&mut form.photos)
-                            .hint_text("the later survey's photos")
-                            .desired_width(280.0),
-                    );
-                    if ui.button("Choose…").clicked() {
-                        commands.push(Command::ShowDialog(DialogKind::SurveyPhotos));
-                    }
-                });
-                ui.end_row();
-                ui.label("Registered dataset");
-                ui.add(
-                    egui::TextEdit::singleline(&mut form.dataset)
-                        .hint_text("a new folder")
-                        .desired_width(280.0),
+                path_row(
+                    ui,
+                    "Photos",
+                    &mut form.photos,
+                    "the later survey's photos",
+                    Some(DialogKind::SurveyPhotos),
+                    commands,
                 );
-                ui.end_row();
+                path_row(
+                    ui,
+                    "Registered dataset",
+                    &mut form.dataset,
+                    "a new folder",
+                    None,
+                    commands,
+                );
             } else {
-                ui.label("Dataset folder");
-                ui.horizontal(|ui| {
-                    ui.add(
-                        egui::TextEdit::singleline(&mut form.dataset)
-                            .hint_text("photos, poses and (optionally) masks")
-                            .desired_width(280.0),
-                    );
-                    if ui.button("Choose…").clicked() {
-                        commands.push(Command::ShowDialog(DialogKind::SurveyDataset));
-                    }
-                });
-                ui.end_row();
+                path_row(
+                    ui,
+                    "Dataset folder",
+                    &mut form.dataset,
+                    "photos, poses and (optionally) masks",
+                    Some(DialogKind::SurveyDataset),
+                    commands,
+                );
             }
             ui.label("Survey name");
             ui.add(egui::TextEdit::singleline(&mut form.name).desired_width(200.0));
@@ -151,18 +145,14 @@ fn fields(ui: &mut egui::Ui, form: &mut AddSurveyForm, commands: &mut Vec<Comman
             .num_columns(2)
             .spacing([8.0, 6.0])
             .show(ui, |ui| {
-                ui.label("Model");
-                ui.horizontal(|ui| {
-                    ui.add(
-                        egui::TextEdit::singleline(&mut form.model)
-                            .hint_text("model.onnx")
-                            .desired_width(280.0),
-                    );
-                    if ui.button("Choose…").clicked() {
-                        commands.push(Command::ShowDialog(DialogKind::SegmentModel));
-                    }
-                });
-                ui.end_row();
+                path_row(
+                    ui,
+                    "Model",
+                    &mut form.model,
+                    "model.onnx",
+                    Some(DialogKind::SegmentModel),
+                    commands,
+                );
                 ui.label("Classes");
                 ui.add(egui::TextEdit::singleline(&mut form.classes).desired_width(200.0))
                     .on_hover_text(

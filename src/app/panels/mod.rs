@@ -28,7 +28,7 @@ pub use timeline::TimelinePanel;
 pub use training::TrainingPanel;
 pub use view::ViewPanel;
 
-use crate::app::commands::Command;
+use crate::app::commands::{Command, DialogKind};
 use crate::app::settings::Settings;
 use crate::app::state::AppState;
 
@@ -43,4 +43,30 @@ pub(crate) fn edit_settings(
     if settings != state.settings {
         commands.push(Command::UpdateSettings(Box::new(settings)));
     }
+}
+
+/// One row of a dialog's grid: `label`, a path typed into `text` (a grey `hint` while empty) and,
+/// with `choose`, a "Choose…" button opening that file dialog.
+pub(crate) fn path_row(
+    ui: &mut egui::Ui,
+    label: &str,
+    text: &mut String,
+    hint: &str,
+    choose: Option<DialogKind>,
+    commands: &mut Vec<Command>,
+) {
+    ui.label(label);
+    ui.horizontal(|ui| {
+        ui.add(
+            egui::TextEdit::singleline(text)
+                .hint_text(hint)
+                .desired_width(280.0),
+        );
+        if let Some(dialog) = choose
+            && ui.button("Choose…").clicked()
+        {
+            commands.push(Command::ShowDialog(dialog));
+        }
+    });
+    ui.end_row();
 }

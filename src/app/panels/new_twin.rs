@@ -5,6 +5,7 @@
 
 use crate::app::commands::{Command, DialogKind};
 use crate::app::panels::colmap_log::colmap_progress;
+use crate::app::panels::path_row;
 use crate::app::state::AppState;
 use crate::app::twin_form::NewTwinForm;
 
@@ -78,32 +79,30 @@ fn fields(ui: &mut egui::Ui, form: &mut NewTwinForm, commands: &mut Vec<Command>
         .num_columns(2)
         .spacing([8.0, 6.0])
         .show(ui, |ui| {
-            ui.label("Photos");
-            ui.horizontal(|ui| {
-                ui.add(
-                    egui::TextEdit::singleline(&mut form.photos)
-                        .hint_text("a folder of overlapping photos")
-                        .desired_width(280.0),
-                );
-                if ui.button("Choose…").clicked() {
-                    commands.push(Command::ShowDialog(DialogKind::TwinPhotos));
-                }
-            });
-            ui.end_row();
-            ui.label("Posed dataset");
-            ui.add(
-                egui::TextEdit::singleline(&mut form.dataset)
-                    .hint_text("a new folder")
-                    .desired_width(280.0),
+            path_row(
+                ui,
+                "Photos",
+                &mut form.photos,
+                "a folder of overlapping photos",
+                Some(DialogKind::TwinPhotos),
+                commands,
             );
-            ui.end_row();
-            ui.label("Twin project");
-            ui.add(
-                egui::TextEdit::singleline(&mut form.project)
-                    .hint_text("a new folder")
-                    .desired_width(280.0),
+            path_row(
+                ui,
+                "Posed dataset",
+                &mut form.dataset,
+                "a new folder",
+                None,
+                commands,
             );
-            ui.end_row();
+            path_row(
+                ui,
+                "Twin project",
+                &mut form.project,
+                "a new folder",
+                None,
+                commands,
+            );
             ui.label("First survey");
             ui.add(egui::TextEdit::singleline(&mut form.survey).desired_width(200.0));
             ui.end_row();
