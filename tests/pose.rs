@@ -406,10 +406,10 @@ fn the_synthetic_building_is_posed_like_its_known_cameras() {
 }
 
 #[test]
-#[ignore = "fails today: pycolmap registers 18 of 18, but this test's comparison through \
-            Dataset::open gives 141° / 3.6 % where scripts/compare_poses.py on the same kind of \
-            run gives 0.50° / 0.03 % (docs/POSE.md): the comparison is to be found; needs \
-            pip install pycolmap, a minute of CPU; run with --ignored"]
+#[ignore = "fails today: of three runs of pose --engine pycolmap on lund 01-18 one registered \
+            18 of 18 (0.49°, 0.05 % against the shipped model), two only 2 of 18 (docs/POSE.md): \
+            COLMAP 4 on this short stretch is not reliable yet; needs pip install pycolmap, a \
+            minute of CPU; run with --ignored"]
 fn the_pycolmap_engine_poses_lund_photos_like_the_shipped_model() {
     let Some(lund) = shared_data::path("opensfm_lund") else {
         return;
@@ -437,6 +437,12 @@ fn the_pycolmap_engine_poses_lund_photos_like_the_shipped_model() {
     assert!(run.status.success(), "{}", stderr(&run));
     let shipped = Dataset::open(&lund, &OpenOptions::default()).unwrap();
     let posed = Dataset::open(&out, &OpenOptions::default()).unwrap();
+    // The count first: a fit needs three cameras, and two registered is how it fails today.
+    assert!(
+        posed.views.len() >= 17,
+        "{} of 18 registered",
+        posed.views.len()
+    );
     let (rotation_deg, position, matched) = pose_errors(&cameras(&shipped), &cameras(&posed));
     eprintln!(
         "lund 01-18 by pycolmap: {matched} of 18 registered, median rotation error \
