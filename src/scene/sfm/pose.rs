@@ -42,6 +42,7 @@ use crate::scene::sfm::progress::{Progress, Stage};
 use crate::scene::sfm::workspace::{
     check_target, copy_masks, extract_args, failed_log_path, file_name, focal_prior,
     keep_failed_log, link_or_copy, list_photos, mean_error, read_components,
+    write_summary_and_commit,
 };
 
 /// How image pairs are chosen for matching.
@@ -353,10 +354,7 @@ pub fn pose_photos(
         seconds: start.elapsed().as_secs_f64(),
         warnings,
     };
-    let json = serde_json::to_string_pretty(&summary)
-        .map_err(|e| SceneError::invalid(run.path(SUMMARY_FILE), e.to_string()))?;
-    write_atomic(&run.path(SUMMARY_FILE), |w| w.write_all(json.as_bytes()))?;
-    run.commit()?;
+    write_summary_and_commit(run, SUMMARY_FILE, &summary)?;
     Ok(summary)
 }
 

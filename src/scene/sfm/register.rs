@@ -21,7 +21,6 @@
 
 use std::collections::HashSet;
 use std::ffi::OsString;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -29,7 +28,6 @@ use glam::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
 
 use crate::scene::SceneError;
-use crate::scene::atomic::write_atomic;
 use crate::scene::colmap::{self, ColmapImage, ColmapModel};
 use crate::scene::files::read_regular;
 use crate::scene::open::stem_of;
@@ -42,7 +40,7 @@ use crate::scene::sfm::pose::{LOG_FILE, MAPPER_SETTINGS, PoseOptions, SUMMARY_FI
 use crate::scene::sfm::progress::{Progress, Stage};
 use crate::scene::sfm::workspace::{
     check_target, copy_masks, extract_args, failed_log_path, file_name, focal_prior,
-    keep_failed_log, link_or_copy, list_photos, read_components,
+    keep_failed_log, link_or_copy, list_photos, read_components, write_summary_and_commit,
 };
 use crate::scene::similarity::Similarity;
 
@@ -337,10 +335,7 @@ pub fn register_photos(
         seconds: start.elapsed().as_secs_f64(),
         warnings,
     };
-    let json = serde_json::to_string_pretty(&summary)
-        .map_err(|e| SceneError::invalid(run.path(REGISTER_FILE), e.to_string()))?;
-    write_atomic(&run.path(REGISTER_FILE), |w| w.write_all(json.as_bytes()))?;
-    run.commit()?;
+    write_summary_and_commit(run, REGISTER_FILE, &summary)?;
     Ok(summary)
 }
 

@@ -4,17 +4,37 @@
 //! wrote, and the log kept beside the target when a run fails.
 
 use std::ffi::OsString;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use serde::Serialize;
+
 use crate::scene::SceneError;
+use crate::scene::atomic::write_atomic;
 use crate::scene::colmap::{self, ColmapModel};
 use crate::scene::files::{EntryBudget, image_size, walk_files};
 use crate::scene::limits::MAX_LISTED_ENTRIES;
 use crate::scene::open::{list_images, stem_of};
+use crate::scene::run_folder::RunFolder;
 use crate::scene::sfm::SfmError;
 use crate::scene::sfm::engine::Engine;
 use crate::scene::sfm::exif::PhotoExif;
 use crate::scene::sfm::pose::PoseOptions;
+
+/// Writes `summary` as pretty JSON to `name` in the staged dataset, then commits the dataset:
+/// the last step of `pose` and of `register`, so a dataset never lacks its summary.
+pub(super) fn write_summary_and_commit(
+    run: RunFolder,
+    name: &str,
+    summary: &impl Serialize,
+) -> Result<(), SfmError> {
+    let path = run.path(name);
+    let json = serde_json::to_string_pretty(summary)
+        .map_err(|e| SceneError::invalid(&path, e.to_string()))?;
+    write_atomic(&path, |w| w.write_all(json.as_bytes()))?;
+    run.commit()?;
+    Ok(())
+}
 
 /// `feature_extractor`'s arguments: one SIMPLE_RADIAL camera for the photos it adds (started
 /// from `prior`, `f,cx,cy,k`, when given), CPU SIFT, ignore masks from `masks` when given.
