@@ -8,37 +8,16 @@
 use damage_twin::raster::{
     FrameFocus, PixelGrads, Rasterizer, RenderOutput, RenderSettings, SplatGrads, tile_grid,
 };
-use damage_twin::scene::{Camera, Intrinsics, Mask, RgbImage};
+use damage_twin::scene::{Camera, Mask, RgbImage};
 use damage_twin::splats::Splats;
-use damage_twin::splats::random::random_in_view;
 use damage_twin::train::spec::{TrainSpec, TrainView};
 use damage_twin::train::trainer::Trainer;
 use glam::Vec3;
 
+mod frame_support;
+use frame_support::{H, W, bits, camera, labelled_model};
+
 const LABELS: usize = 3;
-const W: u32 = 150;
-const H: u32 = 97;
-
-fn camera(eye: Vec3) -> Camera {
-    let k = Intrinsics {
-        width: W,
-        height: H,
-        fx: 140.0,
-        fy: 138.0,
-        cx: 74.3,
-        cy: 49.1,
-    };
-    Camera::look_at(k, eye, Vec3::new(0.0, 0.0, 7.0), Vec3::NEG_Y)
-}
-
-/// A seeded model with label channels, seen by every camera above.
-fn model(n: usize, seed: u64) -> Splats {
-    let mut s = random_in_view(n, &camera(Vec3::ZERO), seed);
-    let mut rng = fastrand::Rng::with_seed(seed + 1);
-    s.label_channels = LABELS;
-    s.raw_labels = (0..n * LABELS).map(|_| rng.f32() * 6.0 - 3.0).collect();
-    s
-}
 
 /// About a third of the tiles, seeded.
 fn active_tiles(seed: u64) -> Vec<bool> {
@@ -58,10 +37,6 @@ fn nudge(s: &mut Splats, ids: &[u32], seed: u64) {
         s.sh[g * k] += rng.f32() - 0.5;
         s.raw_labels[g * LABELS] += rng.f32() - 0.5;
     }
-}
-
-fn bits(v: &[f32]) -> Vec<u32> {
-    v.iter().map(|x| x.to_bits()).collect()
 }
 
 /// One frame and its backward under `focus` (None: whole), with seeded pixel gradients.
@@ -155,7 +130,7 @@ fn assert_same(
 
 #[test]
 fn cached_frames_match_whole_frames_and_are_rebuilt_when_stale() {
-    let mut s = model(3000, 5);
+    let mut s = labelled_model(3000, 5, LABELS);
     let (cam_a, cam_b) = (
         camera(Vec3::new(0.3, -0.2, 0.0)),
         camera(Vec3::new(-0.5, 0.1, 0.4)),
@@ -328,7 +303,7 @@ fn views(target: &Splats) -> Vec<TrainView> {
 
 #[test]
 fn a_focused_run_trains_the_same_with_and_without_the_frozen_cache() {
-    let target = model(2000, 21);
+    let target = labelled_model(2000, 21, LABELS);
     let mut start = target.clone();
     let trainable: Vec<bool> = (0..start.len()).map(|g| g % 4 == 0).collect();
     let ids: Vec<u32> = (0..start.len() as u32)

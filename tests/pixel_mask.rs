@@ -8,34 +8,14 @@ use damage_twin::raster::{
     FrameFocus, PixelGrads, Rasterizer, RenderOutput, RenderSettings, SplatGrads, pixel_rows,
     tile_grid,
 };
-use damage_twin::scene::{Camera, Intrinsics};
+use damage_twin::scene::Camera;
 use damage_twin::splats::Splats;
-use damage_twin::splats::random::random_in_view;
 use glam::Vec3;
 
+mod frame_support;
+use frame_support::{H, W, bits, camera, labelled_model};
+
 const LABELS: usize = 2;
-const W: u32 = 150;
-const H: u32 = 97;
-
-fn camera(eye: Vec3) -> Camera {
-    let k = Intrinsics {
-        width: W,
-        height: H,
-        fx: 140.0,
-        fy: 138.0,
-        cx: 74.3,
-        cy: 49.1,
-    };
-    Camera::look_at(k, eye, Vec3::new(0.0, 0.0, 7.0), Vec3::NEG_Y)
-}
-
-fn model(n: usize, seed: u64) -> Splats {
-    let mut s = random_in_view(n, &camera(Vec3::ZERO), seed);
-    let mut rng = fastrand::Rng::with_seed(seed + 1);
-    s.label_channels = LABELS;
-    s.raw_labels = (0..n * LABELS).map(|_| rng.f32() * 6.0 - 3.0).collect();
-    s
-}
 
 /// A thin slanted band and a disc: hull-like shapes that cut through tiles.
 fn region() -> Vec<u8> {
@@ -61,10 +41,6 @@ fn tiles_of(mask: &[u8]) -> Vec<bool> {
         }
     }
     t
-}
-
-fn bits(v: &[f32]) -> Vec<u32> {
-    v.iter().map(|x| x.to_bits()).collect()
 }
 
 /// A frame and its backward, pixel gradients seeded and zero outside `mask`.
@@ -159,7 +135,7 @@ fn assert_same(
 
 #[test]
 fn masked_frames_match_plain_frames_inside_the_region() {
-    let s = model(3000, 5);
+    let s = labelled_model(3000, 5, LABELS);
     let cam = camera(Vec3::new(0.3, -0.2, 0.0));
     let mask = region();
     let masked = frame(&mut Rasterizer::new(), &s, &cam, &mask, true, None);
@@ -169,7 +145,7 @@ fn masked_frames_match_plain_frames_inside_the_region() {
 
 #[test]
 fn masked_focused_frames_match_plain_whole_frames() {
-    let mut s = model(3000, 7);
+    let mut s = labelled_model(3000, 7, LABELS);
     let cam = camera(Vec3::new(-0.4, 0.1, 0.3));
     let mask = region();
     let trainable: Vec<u32> = (0..s.len() as u32).filter(|g| g % 6 == 0).collect();
