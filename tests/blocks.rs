@@ -11,7 +11,7 @@ use std::process::{Command, Stdio};
 use damage_twin::blocks::plan::{PLAN_FILE, load_plan, save_plan};
 
 mod blocks_support;
-use blocks_support::{binary, run, tiny_plan};
+use blocks_support::{binary, cluster_local_two_workers, run, tiny_plan};
 
 fn train_block(plan: &Path, k: usize) -> Command {
     let mut command = binary();
@@ -125,13 +125,7 @@ fn cluster_local_merges_and_a_killed_block_rerun_gives_the_same_model() {
     // The undisturbed run: both blocks on two local workers, then the merge.
     let calm = tiny_plan(root.path(), "calm");
     let merged_calm = root.path().join("merged-calm");
-    let mut local = binary();
-    local
-        .args(["cluster", "local"])
-        .arg(&calm)
-        .args(["--workers", "2", "--threads", "1", "--out"])
-        .arg(&merged_calm);
-    run(local);
+    cluster_local_two_workers(&calm, &merged_calm);
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(merged_calm.join("merge.json")).unwrap()).unwrap();
     let gaussians = report["gaussians"].as_u64().unwrap();

@@ -10,7 +10,7 @@ use std::time::Duration;
 mod blocks_support;
 mod slurm_support;
 
-use blocks_support::{binary, run, tiny_plan};
+use blocks_support::{binary, cluster_local_two_workers, run, tiny_plan};
 use slurm_support::SlurmCluster;
 
 #[test]
@@ -76,13 +76,7 @@ fn slurm_trains_the_blocks_and_merges_like_the_local_engine() {
     // The same plan trained by the local engine gives the same merged model.
     let local_plan = tiny_plan(cluster.dir(), "local");
     let local_merged = cluster.dir().join("merged-local");
-    let mut local = binary();
-    local
-        .args(["cluster", "local"])
-        .arg(&local_plan)
-        .args(["--workers", "2", "--threads", "1", "--out"])
-        .arg(&local_merged);
-    run(local);
+    cluster_local_two_workers(&local_plan, &local_merged);
     let slurm_model = std::fs::read(merged.join("model.ply")).unwrap();
     let local_model = std::fs::read(local_merged.join("model.ply")).unwrap();
     assert!(!slurm_model.is_empty());

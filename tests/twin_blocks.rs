@@ -15,7 +15,7 @@ use damage_twin::splats::Splats;
 use damage_twin::splats::ply::read_splats;
 
 mod blocks_support;
-use blocks_support::{binary, run};
+use blocks_support::{binary, cluster_local_two_workers, run};
 
 /// A two-span bridge at 96×54 (survey 1: 24 views; survey 2: 12, new damage on one span).
 fn tiny_bridge(root: &Path) -> PathBuf {
@@ -126,13 +126,7 @@ fn a_partitioned_twin_updates_only_its_changed_blocks() {
         .args(["--blocks", "2", "--iters", "60", "--seed", "5"]);
     run(partition);
     let merged = root.path().join("merged");
-    let mut local = binary();
-    local
-        .args(["cluster", "local"])
-        .arg(&plan)
-        .args(["--workers", "2", "--threads", "1", "--out"])
-        .arg(&merged);
-    run(local);
+    cluster_local_two_workers(&plan, &merged);
     let first_plan = snapshot(&plan);
 
     // A plan of another survey's dataset is refused.

@@ -1,5 +1,6 @@
-//! Shared by the block tests (`tests/blocks.rs`, `tests/slurm_blocks.rs`): the binary, a run
-//! that must succeed, and a tiny demo building partitioned into two blocks.
+//! Shared by the block tests (`tests/blocks.rs`, `tests/slurm_blocks.rs`, `tests/twin_blocks.rs`):
+//! the binary, a run that must succeed, a tiny demo building partitioned into two blocks, and a
+//! plan's blocks trained and merged by `cluster local`.
 
 // Each test binary uses only some of these helpers.
 #![allow(dead_code)]
@@ -19,6 +20,17 @@ pub fn run(mut command: Command) -> Output {
         String::from_utf8_lossy(&output.stderr)
     );
     output
+}
+
+/// `cluster local PLAN --workers 2 --threads 1 --out MERGED`, which must succeed.
+pub fn cluster_local_two_workers(plan: &Path, merged: &Path) {
+    let mut local = binary();
+    local
+        .args(["cluster", "local"])
+        .arg(plan)
+        .args(["--workers", "2", "--threads", "1", "--out"])
+        .arg(merged);
+    run(local);
 }
 
 /// A tiny demo building (96×54, 16 views) and a 2-block plan of it in `root/plan`.
