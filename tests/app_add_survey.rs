@@ -6,22 +6,21 @@
 //! no masks. Quick: no training, 192×108 photos.
 #![cfg(feature = "app")]
 
+mod app_support;
 mod project_support;
 mod shared_data;
 
 use std::path::Path;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use app_support::viewer_on_one_survey;
 use damage_twin::app::commands::Command;
-use damage_twin::app::settings::Settings;
-use damage_twin::app::state::{AppState, LoadedSurvey, TimelineView};
+use damage_twin::app::state::AppState;
 use damage_twin::app::survey_form::AddSurveyForm;
 use damage_twin::scene::DamageClass;
 use damage_twin::scene::masks::count_masks;
 use damage_twin::scene::project::PROJECT_FILE;
 use damage_twin::timeline::Twin;
-use project_support::one_gaussian;
 
 /// Polls until no timeline job runs, at most 60 s.
 fn poll_until_idle(state: &mut AppState) {
@@ -54,21 +53,11 @@ fn viewer_on_project(dir: &Path) -> AppState {
     };
     damage_twin::synth::generate(&params, &|_, _| {}).expect("synth");
     std::fs::remove_dir_all(dir.join("synth/survey-2/masks")).expect("removes the masks");
-    let project = dir.join("project");
-    let mut twin = Twin::create(&project).expect("creates");
-    twin.add_survey("survey-1", "2024-06-01", &dir.join("synth/survey-1"))
-        .expect("adds survey 1");
-    twin.save_model("survey-1", &one_gaussian()).expect("model");
-    twin.save().expect("saves");
-    let mut state = AppState::new(Settings::default());
-    let shown = LoadedSurvey {
-        splats: Some(Arc::new(one_gaussian())),
-        dataset: None,
-        edited: false,
-    };
-    let opened = Twin::open(&project).expect("opens");
-    state.timeline = Some(TimelineView::new(opened, 0, shown));
-    state
+    viewer_on_one_survey(
+        &dir.join("project"),
+        "survey-1",
+        &dir.join("synth/survey-1"),
+    )
 }
 
 fn form(state: &AppState) -> &AddSurveyForm {

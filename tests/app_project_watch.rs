@@ -3,16 +3,15 @@
 //! read again, so the viewer never shows a stale record as current. Quick: no training.
 #![cfg(feature = "app")]
 
+mod app_support;
 mod project_support;
 
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use damage_twin::app::settings::Settings;
-use damage_twin::app::state::{AppState, LoadedSurvey, TimelineView};
+use app_support::viewer_on_one_survey;
+use damage_twin::app::state::AppState;
 use damage_twin::timeline::Twin;
 use damage_twin::timeline::lock::LOCK_FILE;
-use project_support::one_gaussian;
 
 /// Polls until `done` holds, at most 10 s (the watch looks once a second).
 fn poll_until(state: &mut AppState, done: impl Fn(&AppState) -> bool) {
@@ -37,20 +36,7 @@ fn holder(state: &AppState) -> Option<String> {
 fn another_writer_is_named_and_its_change_read_again() {
     let dir = tempfile::tempdir().expect("temp dir");
     let project = dir.path().join("project");
-    let mut twin = Twin::create(&project).expect("creates");
-    twin.add_survey("2024", "2024-06-01", &dir.path().join("data/2024"))
-        .expect("adds a survey");
-    twin.save_model("2024", &one_gaussian()).expect("model");
-    twin.save().expect("saves");
-
-    let mut state = AppState::new(Settings::default());
-    let shown = LoadedSurvey {
-        splats: Some(Arc::new(one_gaussian())),
-        dataset: None,
-        edited: false,
-    };
-    let opened = Twin::open(&project).expect("opens");
-    state.timeline = Some(TimelineView::new(opened, 0, shown));
+    let mut state = viewer_on_one_survey(&project, "2024", &dir.path().join("data/2024"));
 
     // Another process adds a survey: the viewer reads the record again.
     let mut other = Twin::open(&project).expect("opens");
