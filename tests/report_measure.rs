@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use glam::{Quat, Vec3};
 
 use damage_twin::damage::DamageClass;
-use damage_twin::damage::measure::{MeasureConfig, measure_damage};
+use damage_twin::damage::measure::{MeasureConfig, Measurement, measure_damage};
 use damage_twin::report::georeference::ReportGeoreference;
 use damage_twin::report::inspection::{InspectionReport, ReportSettings, report_html};
 use damage_twin::report::project_runs::project_runs;
@@ -461,4 +461,16 @@ fn a_stray_damage_gaussian_far_out_in_the_plane_does_not_blow_up_the_map() {
     assert!(cells <= 8_000_000, "{cells} cells");
     let length = m.total_length(DamageClass::Crack);
     assert!((length - 2.5).abs() < 0.4, "crack length {length} m");
+}
+
+#[test]
+fn a_class_without_regions_totals_zero_not_minus_zero() {
+    // `Iterator::sum` of no f64 is −0: `study real` wrote "measured -0.000" for lund's rebar.
+    let none = Measurement::default();
+    for class in DamageClass::ALL {
+        for total in [none.total_length(class), none.total_area(class)] {
+            assert!(total.is_sign_positive(), "{class:?}: {total}");
+            assert_eq!(format!("{total:.3}"), "0.000");
+        }
+    }
 }

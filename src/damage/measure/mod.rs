@@ -136,18 +136,25 @@ pub struct Measurement {
 }
 
 impl Measurement {
-    /// Total length (crack, rebar) or area (spalling) of a class.
+    /// Total length (crack, rebar) or area (spalling) of a class; 0 (not −0) when it has no
+    /// region.
     pub fn total_length(&self, class: DamageClass) -> f64 {
-        self.of(class).filter_map(|r| r.length).sum()
+        plus_zero_sum(self.of(class).filter_map(|r| r.length))
     }
 
     pub fn total_area(&self, class: DamageClass) -> f64 {
-        self.of(class).map(|r| r.area).sum()
+        plus_zero_sum(self.of(class).map(|r| r.area))
     }
 
     pub fn of(&self, class: DamageClass) -> impl Iterator<Item = &MeasuredRegion> {
         self.regions.iter().filter(move |r| r.class == class)
     }
+}
+
+/// The sum from +0: `Iterator::sum` of no `f64`s is −0, which `study real` printed and wrote as
+/// "measured -0.000" for a class the twin holds none of.
+fn plus_zero_sum(values: impl Iterator<Item = f64>) -> f64 {
+    values.fold(0.0, |sum, value| sum + value)
 }
 
 /// Most cells a plane's map may have (~100 MB with three label channels): a plane whose damage
