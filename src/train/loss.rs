@@ -442,6 +442,95 @@ mod tests {
         }
     }
 
+    /// A hull-like region: a slanted band two pixels wide and a block, in a 37×23 image.
+    fn hull_region(w: usize, h: usize) -> Vec<f32> {
+        (0..w * h)
+            .map(|p| {
+                let (x, y) = ((p % w) as i64, (p / w) as i64);
+                let band = (x - y - 4).abs() <= 1;
+                let block = (25..31).contains(&x) && (3..9).contains(&y);
+                if band || block { 1.0 } else { 0.0 }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn region_runs_give_the_whole_crop_passes_bits() {
+        // The plain reference: the L1 and the label loss over every pixel of the crop, as
+        // before they walked the region's runs.
+        let (w, h, channels) = (37usize, 23usize, 2usize);
+        let n = w * h;
+        let m = hull_region(w, h);
+        let (x, t) = (image(n * 3, 11), image(n * 3, 12));
+        let mass: f64 = m.iter().map(|&v| v as f64).sum();
+        let scale = (1.0 / (3.0 * mass)) as f32;
+        let mut l1 = 0.0f64;
+        let mut v_plain = vec![0.0f32; n * 3];
+        for y in 0..h {
+            let mut row = 0.0f64;
+            for px in 0..w {
+                let p = y * w + px;
+                let a_p = m[p] * scale;
+                for c in 0..3 {
+                    let d = x[p * 3 + c] - t[p * 3 + c];
+                    row += (a_p * d.abs()) as f64;
+                    v_plain[p * 3 + c] = a_p * d.signum() * if d == 0.0 { 0.0 } else { 1.0 };
+                }
+            }
+            l1 += row;
+        }
+        // λ = 0: the gradient is the L1's alone.
+        let mut v = vec![f32::NAN; n * 3];
+        let got = photometric_loss(
+            &mut LossWorkspace::new(),
+            &x,
+            &t,
+            w as u32,
+            h as u32,
+            Some(&m),
+            0.0,
+            &mut v,
+        );
+        assert_eq!(got.l1.to_bits(), (l1 as f32).to_bits());
+        for (i, (a, b)) in v.iter().zip(&v_plain).enumerate() {
+            assert!(a == b, "lane {i}: {a} against {b}");
+        }
+
+        let labels = image(n * channels, 13);
+        let masks: Vec<Vec<u8>> = (0..channels)
+            .map(|k| (0..n).map(|p| u8::from((p + k) % 3 == 0)).collect())
+            .collect();
+        let params = LabelLossParams::default();
+        let total = mass * channels as f64;
+        let mut plain = 0.0f64;
+        let mut v_plain = vec![0.0f32; n * channels];
+        for p in 0..n {
+            if m[p] == 0.0 {
+                continue;
+            }
+            for k in 0..channels {
+                let q = labels[p * channels + k].clamp(params.eps, 1.0 - params.eps);
+                let scale = m[p] as f64 * (1.0 / total);
+                if masks[k][p] != 0 {
+                    plain -= scale * (params.pos_weight * q.ln()) as f64;
+                    v_plain[p * channels + k] = (-(scale as f32) * params.pos_weight) / q;
+                } else {
+                    plain -= scale * (1.0 - q).ln() as f64;
+                    v_plain[p * channels + k] = (scale as f32) / (1.0 - q);
+                }
+            }
+        }
+        let targets: Vec<Option<&[u8]>> = masks.iter().map(|m| Some(m.as_slice())).collect();
+        let mut v = vec![f32::NAN; n * channels];
+        let got = label_loss(&labels, channels, &targets, Some(&m), &params, &mut v);
+        assert_eq!(got.to_bits(), (plain as f32).to_bits());
+        assert!(
+            v.iter()
+                .zip(&v_plain)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        );
+    }
+
     #[test]
     fn fast_ssim_matches_the_metric() {
         let (w, h) = (41u32, 29u32);
