@@ -108,6 +108,9 @@ fn detection_and_update_keep_the_history() {
     )
     .wait()
     .expect("updates");
+    // The cost comparison is `bench --refine`'s: an update times no full-image steps.
+    assert!(outcome.report.refine.step_costs.is_none());
+    assert!(outcome.report.refine.ms_per_full_step.is_none());
     let second_model = twin
         .save_model("2025", &outcome.splats)
         .expect("saves survey 2");

@@ -6,6 +6,8 @@
 use std::path::Path;
 use std::sync::Arc;
 
+use anyhow::Context;
+
 use damage_twin::damage::evaluate::DamageReadout;
 use damage_twin::damage::refine::{RefineConfig, StepCosts, refine_job};
 use damage_twin::damage::select::SelectConfig;
@@ -36,7 +38,11 @@ pub fn run(model_path: &Path, args: &Args) -> anyhow::Result<()> {
     };
     let job = refine_job(dataset, model, config, JobOptions::headless(args.threads));
     let outcome = drive(job, "refinement benchmark", true, |_| {})?;
-    let costs = &outcome.report.step_costs;
+    let costs = outcome
+        .report
+        .step_costs
+        .as_ref()
+        .context("the refinement benchmark timed no steps")?;
     print!("{}", stage_table(costs));
     println!("{}", serde_json::to_string_pretty(costs)?);
     Ok(())
@@ -82,6 +88,12 @@ fn stage_table(c: &StepCosts) -> String {
         share(c.region_tile_pixels),
         c.ssim_pixels,
         share(c.ssim_pixels),
+    );
+    // The yardstick: a refinement step's cost against its region's pixel share.
+    s += &format!(
+        "refinement step {:.1} % of a full step = {:.2} × the region's pixel share\n",
+        100.0 * c.share,
+        100.0 * c.share / share(c.region_pixels).max(f64::MIN_POSITIVE),
     );
     s
 }

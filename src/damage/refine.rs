@@ -66,12 +66,17 @@ pub struct RefineReport {
     pub ms_per_refine_step: f64,
     /// The refinement step by stage.
     pub stage_ms_per_step: crate::train::trainer::StageTimes,
-    /// A full-image step of the same model at the same resolution, for comparison.
-    pub ms_per_full_step: f64,
+    /// A full-image step of the same model at the same resolution, for comparison (only when
+    /// `RefineConfig::cost_rounds` asked for the comparison).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ms_per_full_step: Option<f64>,
     /// That full-image step by stage.
-    pub stage_ms_per_full_step: crate::train::trainer::StageTimes,
-    /// The refinement step against the full-image one, timed interleaved, with pixel counts.
-    pub step_costs: StepCosts,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stage_ms_per_full_step: Option<crate::train::trainer::StageTimes>,
+    /// The refinement step against the full-image one, timed interleaved, with pixel counts
+    /// (`bench --refine`; None unless `RefineConfig::cost_rounds` > 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub step_costs: Option<StepCosts>,
     pub before: Quality,
     pub after: Quality,
     pub views: Vec<ViewHulls>,
@@ -230,17 +235,22 @@ pub fn refine_from(
         }
         spec.geometry_rate = Some(rates);
     }
-    // The cost comparison: the run's step against a full-image step, interleaved.
-    let costs = step_costs(
-        &focus,
-        model,
-        &spec,
-        &trained,
-        &crops,
-        &targets,
-        mode,
-        config.cost_rounds,
-    )?;
+    // The cost comparison, when asked for (`bench --refine`): the run's step against a
+    // full-image step, interleaved. Off by default: it costs a dozen full-image steps.
+    let costs = if config.cost_rounds > 0 {
+        Some(step_costs(
+            &focus,
+            model,
+            &spec,
+            &trained,
+            &crops,
+            &targets,
+            mode,
+            config.cost_rounds,
+        )?)
+    } else {
+        None
+    };
     let setup = TrainSetup {
         spec,
         splats: model.clone(),
@@ -286,8 +296,8 @@ pub fn refine_from(
         gaussians_before: baseline.len(),
         gaussians_after: refined.len(),
         ms_per_refine_step: outcome.timings.total * 1000.0 / outcome.steps.max(1) as f64,
-        ms_per_full_step: costs.full_ms.total,
-        stage_ms_per_full_step: costs.full_ms.clone(),
+        ms_per_full_step: costs.as_ref().map(|c| c.full_ms.total),
+        stage_ms_per_full_step: costs.as_ref().map(|c| c.full_ms.clone()),
         step_costs: costs,
         stage_ms_per_step: outcome.timings.per_step_ms(outcome.steps),
         before,

@@ -52,7 +52,8 @@ pub struct RefineConfig {
     /// (`truth_hulls`; refused without truth masks).
     pub hulls_from_truth: bool,
     /// Timed rounds (one step per view of the refinement's and of full-image steps each) of
-    /// the cost comparison `RefineReport::step_costs`.
+    /// the cost comparison `RefineReport::step_costs`; 0 (the default) skips it, as every
+    /// refinement and survey update does: `bench --refine` asks for it.
     pub cost_rounds: u32,
 }
 
@@ -86,7 +87,7 @@ impl Default for RefineConfig {
             backend: Default::default(),
             stop_when_flat: None,
             hulls_from_truth: false,
-            cost_rounds: 2,
+            cost_rounds: 0,
         }
     }
 }

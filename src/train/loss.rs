@@ -4,7 +4,8 @@
 
 use rayon::prelude::*;
 
-use super::ssim::{RegionSsim, SsimWorkspace, ssim_with_grad};
+use super::region_runs::RegionRuns;
+use super::ssim::{RegionImages, RegionSsim, SsimWorkspace, ssim_with_grad};
 
 /// Weight of the D-SSIM term (3DGS `lambda_dssim`).
 pub const SSIM_LAMBDA: f32 = 0.2;
@@ -15,14 +16,17 @@ pub struct LossWorkspace {
     ssim: SsimWorkspace,
     /// The SSIM of a sparse region, on pieces around its tiles.
     region_ssim: RegionSsim,
-    /// Region-blended render `m·x + (1-m)·t`.
+    /// Region-blended render `m·x + (1-m)·t` (only for a region the SSIM pieces would not
+    /// save on).
     blended: Vec<f32>,
-    /// Per-pixel weights `a_p = m_p / (3·Σm)`.
+    /// Per-pixel weights `a_p = m_p / (3·Σm)` (as `blended`).
     weights: Vec<f32>,
     /// dSSIM/d(blended).
     v_ssim: Vec<f32>,
     /// Weighted L1 per pixel row, summed in order for a thread-independent result.
     row_sums: Vec<f64>,
+    /// The region's pixels as runs per row.
+    runs: RegionRuns,
 }
 
 impl LossWorkspace {
@@ -67,18 +71,57 @@ pub fn photometric_loss(
     }
     ws.row_sums.resize(h, 0.0);
     ws.v_ssim.resize(n * 3, 0.0);
+    let Some(m) = region else {
+        let ssim = ssim_with_grad(
+            &mut ws.ssim,
+            rendered,
+            target,
+            width,
+            height,
+            None,
+            Some(&mut ws.v_ssim),
+        );
+        let uniform = 1.0 / (3.0 * n.max(1) as f32);
+        let v_ssim = &ws.v_ssim;
+        let row_w = w * 3;
+        v_rendered
+            .par_chunks_mut(row_w.max(1))
+            .zip(ws.row_sums.par_iter_mut())
+            .enumerate()
+            .for_each(|(y, (v_row, row_sum))| {
+                let span = PixelSpan {
+                    first: y * w,
+                    a_p: |_| uniform,
+                    m_p: |_| 1.0,
+                };
+                *row_sum = l1_and_gradient(span, rendered, target, v_ssim, lambda, v_row, 0.0);
+            });
+        return combine(&ws.row_sums, lambda, ssim);
+    };
 
-    // Per-pixel weights: uniform, or the region normalised to sum 1/3 per channel.
-    let uniform = 1.0 / (3.0 * n.max(1) as f32);
-    let (ssim_input, weights): (&[f32], Option<&[f32]>) = match region {
-        None => (rendered, None),
-        Some(m) => {
-            let mass: f64 = m.iter().map(|&v| v as f64).sum();
-            if !(mass > 0.0) {
-                v_rendered.fill(0.0);
-                return PhotometricLoss::default();
-            }
-            let scale = (1.0 / (3.0 * mass)) as f32;
+    // A region: only its pixels (its runs) are visited; the rest get no gradient.
+    ws.runs.rebuild(m, w, h);
+    let mass = ws.runs.mass(m);
+    if !(mass > 0.0) {
+        v_rendered.fill(0.0);
+        return PhotometricLoss::default();
+    }
+    // Per-pixel weights: the region normalised to sum 1/3 per channel.
+    let scale = (1.0 / (3.0 * mass)) as f32;
+    // The SSIM on the pieces around the region's pixels (`ssim::region`), unless they would
+    // cover the whole image anyway; it sees `m·rendered + (1-m)·target`.
+    let images = RegionImages {
+        rendered,
+        target,
+        region: m,
+        scale,
+    };
+    let pieces = ws
+        .region_ssim
+        .ssim_with_grad(images, &ws.runs, &mut ws.v_ssim);
+    let ssim = match pieces {
+        Some(ssim) => ssim,
+        None => {
             ws.weights.clear();
             ws.weights.extend(m.iter().map(|&v| v * scale));
             ws.blended.resize(n * 3, 0.0);
@@ -91,60 +134,86 @@ pub fn photometric_loss(
                         b[c] = mp * x[c] + (1.0 - mp) * t[c];
                     }
                 });
-            (&ws.blended[..], Some(&ws.weights[..]))
+            ssim_with_grad(
+                &mut ws.ssim,
+                &ws.blended,
+                target,
+                width,
+                height,
+                Some(&ws.weights),
+                Some(&mut ws.v_ssim),
+            )
         }
     };
-    // A region's SSIM on the pieces around its tiles (`ssim::region`), unless they would
-    // cover the whole image anyway.
-    let pieces = weights.and_then(|a| {
-        ws.region_ssim
-            .ssim_with_grad(ssim_input, target, width, height, a, &mut ws.v_ssim)
-    });
-    let ssim = pieces.unwrap_or_else(|| {
-        ssim_with_grad(
-            &mut ws.ssim,
-            ssim_input,
-            target,
-            width,
-            height,
-            weights,
-            Some(&mut ws.v_ssim),
-        )
-    });
 
-    // L1 and the combined gradient, row by row.
-    let v_ssim = &ws.v_ssim;
-    let row_w = w * 3;
+    // L1 and the combined gradient on the region's runs, row by row.
+    v_rendered.fill(0.0);
+    let (v_ssim, runs) = (&ws.v_ssim, &ws.runs);
     v_rendered
-        .par_chunks_mut(row_w.max(1))
+        .par_chunks_mut((w * 3).max(1))
         .zip(ws.row_sums.par_iter_mut())
         .enumerate()
         .for_each(|(y, (v_row, row_sum))| {
             let mut sum = 0.0f64;
-            for (px, v) in v_row.chunks_exact_mut(3).enumerate() {
-                let p = y * w + px;
-                let (a_p, m_p) = match (weights, region) {
-                    (Some(a), Some(m)) => (a[p], m[p]),
-                    _ => (uniform, 1.0),
+            for &[x0, x1] in runs.row(y) {
+                let span = PixelSpan {
+                    first: y * w + x0,
+                    a_p: |p| m[p] * scale,
+                    m_p: |p| m[p],
                 };
-                for (c, vc) in v.iter_mut().enumerate() {
-                    let i = p * 3 + c;
-                    let d = rendered[i] - target[i];
-                    sum += (a_p * d.abs()) as f64;
-                    // d|d|/dd = sign(d), 0 at 0 as torch defines it.
-                    let sign = if d > 0.0 {
-                        1.0
-                    } else if d < 0.0 {
-                        -1.0
-                    } else {
-                        0.0
-                    };
-                    *vc = (1.0 - lambda) * a_p * sign - lambda * m_p * v_ssim[i];
-                }
+                let v_run = &mut v_row[x0 * 3..x1 * 3];
+                // Carried across the runs: the same additions, in the same order, as over the
+                // whole row (the pixels between add exact zeros).
+                sum = l1_and_gradient(span, rendered, target, v_ssim, lambda, v_run, sum);
             }
             *row_sum = sum;
         });
-    let l1: f64 = ws.row_sums.iter().sum();
+    combine(&ws.row_sums, lambda, ssim)
+}
+
+/// Pixels `first, first + 1, …` of one row (as many as the gradient slice holds) with their L1
+/// weight `a_p` and region weight `m_p`.
+struct PixelSpan<A, M> {
+    first: usize,
+    a_p: A,
+    m_p: M,
+}
+
+/// `sum` plus the weighted L1 of a span's pixels, added left to right, writing each lane's
+/// gradient `(1-λ)·a_p·sign(d) - λ·m_p·dSSIM/dx` into `v` (the span's lanes).
+fn l1_and_gradient<A: Fn(usize) -> f32, M: Fn(usize) -> f32>(
+    span: PixelSpan<A, M>,
+    rendered: &[f32],
+    target: &[f32],
+    v_ssim: &[f32],
+    lambda: f32,
+    v: &mut [f32],
+    mut sum: f64,
+) -> f64 {
+    for (k, v) in v.chunks_exact_mut(3).enumerate() {
+        let p = span.first + k;
+        let (a_p, m_p) = ((span.a_p)(p), (span.m_p)(p));
+        for (c, vc) in v.iter_mut().enumerate() {
+            let i = p * 3 + c;
+            let d = rendered[i] - target[i];
+            sum += (a_p * d.abs()) as f64;
+            // d|d|/dd = sign(d), 0 at 0 as torch defines it.
+            let sign = if d > 0.0 {
+                1.0
+            } else if d < 0.0 {
+                -1.0
+            } else {
+                0.0
+            };
+            *vc = (1.0 - lambda) * a_p * sign - lambda * m_p * v_ssim[i];
+        }
+    }
+    sum
+}
+
+/// The loss from the rows' weighted L1 sums (added in row order) and the weighted SSIM.
+fn combine(row_sums: &[f64], lambda: f32, ssim: f64) -> PhotometricLoss {
+    let l1: f64 = row_sums.iter().sum();
     let loss = (1.0 - lambda as f64) * l1 + lambda as f64 * (1.0 - ssim);
     PhotometricLoss {
         loss: loss as f32,
@@ -211,7 +280,12 @@ pub fn label_loss(
         assert_eq!(m.len(), n, "label_loss: region size");
     }
     let supervised = targets.iter().filter(|t| t.is_some()).count();
-    let mass: f64 = region.map_or(n as f64, |m| m.iter().map(|&v| v as f64).sum());
+    // A region's pixels as runs of one row of `n`: only they are visited.
+    let runs = region.map(|m| RegionRuns::of(m, n, 1));
+    let mass: f64 = match (&runs, region) {
+        (Some(runs), Some(m)) => runs.mass(m),
+        _ => n as f64,
+    };
     let total = mass * supervised as f64;
     if !(total > 0.0) {
         return 0.0;
@@ -219,15 +293,14 @@ pub fn label_loss(
     let inv_total = 1.0 / total;
     let (pw, eps) = (params.pos_weight, params.eps);
     let mut loss = 0.0f64;
-    for (p, (r, v)) in rendered
-        .chunks_exact(channels)
-        .zip(v_labels.chunks_exact_mut(channels))
-        .enumerate()
-    {
+    let pixels: Box<dyn Iterator<Item = usize>> = match &runs {
+        Some(runs) => Box::new(runs.pixels()),
+        None => Box::new(0..n),
+    };
+    for p in pixels {
         let m = region.map_or(1.0, |m| m[p]);
-        if m == 0.0 {
-            continue;
-        }
+        let r = &rendered[p * channels..(p + 1) * channels];
+        let v = &mut v_labels[p * channels..(p + 1) * channels];
         for (k, target) in targets.iter().enumerate() {
             let Some(target) = target else { continue };
             let q = r[k].clamp(eps, 1.0 - eps);
@@ -367,6 +440,95 @@ mod tests {
                 assert_eq!(&grad[p * 3..p * 3 + 3], &[0.0; 3]);
             }
         }
+    }
+
+    /// A hull-like region: a slanted band two pixels wide and a block, in a 37×23 image.
+    fn hull_region(w: usize, h: usize) -> Vec<f32> {
+        (0..w * h)
+            .map(|p| {
+                let (x, y) = ((p % w) as i64, (p / w) as i64);
+                let band = (x - y - 4).abs() <= 1;
+                let block = (25..31).contains(&x) && (3..9).contains(&y);
+                if band || block { 1.0 } else { 0.0 }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn region_runs_give_the_whole_crop_passes_bits() {
+        // The plain reference: the L1 and the label loss over every pixel of the crop, as
+        // before they walked the region's runs.
+        let (w, h, channels) = (37usize, 23usize, 2usize);
+        let n = w * h;
+        let m = hull_region(w, h);
+        let (x, t) = (image(n * 3, 11), image(n * 3, 12));
+        let mass: f64 = m.iter().map(|&v| v as f64).sum();
+        let scale = (1.0 / (3.0 * mass)) as f32;
+        let mut l1 = 0.0f64;
+        let mut v_plain = vec![0.0f32; n * 3];
+        for y in 0..h {
+            let mut row = 0.0f64;
+            for px in 0..w {
+                let p = y * w + px;
+                let a_p = m[p] * scale;
+                for c in 0..3 {
+                    let d = x[p * 3 + c] - t[p * 3 + c];
+                    row += (a_p * d.abs()) as f64;
+                    v_plain[p * 3 + c] = a_p * d.signum() * if d == 0.0 { 0.0 } else { 1.0 };
+                }
+            }
+            l1 += row;
+        }
+        // λ = 0: the gradient is the L1's alone.
+        let mut v = vec![f32::NAN; n * 3];
+        let got = photometric_loss(
+            &mut LossWorkspace::new(),
+            &x,
+            &t,
+            w as u32,
+            h as u32,
+            Some(&m),
+            0.0,
+            &mut v,
+        );
+        assert_eq!(got.l1.to_bits(), (l1 as f32).to_bits());
+        for (i, (a, b)) in v.iter().zip(&v_plain).enumerate() {
+            assert!(a == b, "lane {i}: {a} against {b}");
+        }
+
+        let labels = image(n * channels, 13);
+        let masks: Vec<Vec<u8>> = (0..channels)
+            .map(|k| (0..n).map(|p| u8::from((p + k) % 3 == 0)).collect())
+            .collect();
+        let params = LabelLossParams::default();
+        let total = mass * channels as f64;
+        let mut plain = 0.0f64;
+        let mut v_plain = vec![0.0f32; n * channels];
+        for p in 0..n {
+            if m[p] == 0.0 {
+                continue;
+            }
+            for k in 0..channels {
+                let q = labels[p * channels + k].clamp(params.eps, 1.0 - params.eps);
+                let scale = m[p] as f64 * (1.0 / total);
+                if masks[k][p] != 0 {
+                    plain -= scale * (params.pos_weight * q.ln()) as f64;
+                    v_plain[p * channels + k] = (-(scale as f32) * params.pos_weight) / q;
+                } else {
+                    plain -= scale * (1.0 - q).ln() as f64;
+                    v_plain[p * channels + k] = (scale as f32) / (1.0 - q);
+                }
+            }
+        }
+        let targets: Vec<Option<&[u8]>> = masks.iter().map(|m| Some(m.as_slice())).collect();
+        let mut v = vec![f32::NAN; n * channels];
+        let got = label_loss(&labels, channels, &targets, Some(&m), &params, &mut v);
+        assert_eq!(got.to_bits(), (plain as f32).to_bits());
+        assert!(
+            v.iter()
+                .zip(&v_plain)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        );
     }
 
     #[test]

@@ -17,6 +17,7 @@ pub mod light_fit;
 pub mod loss;
 pub mod plateau;
 pub mod priority;
+pub mod region_runs;
 pub mod run;
 pub mod scale_cap;
 pub mod schedule;

@@ -572,6 +572,6 @@ fn ssim_in_bands(
 }
 
 mod region;
-pub use region::RegionSsim;
+pub use region::{RegionImages, RegionSsim};
 #[cfg(test)]
 mod tests;
