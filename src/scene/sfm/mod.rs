@@ -7,6 +7,8 @@
 //!   from its own output, failures reported with the command and its last lines.
 //! - `progress`: COLMAP's log lines as progress (stage, done, total).
 //! - `pose`: the pipeline (stage, extract, match, map, largest component, dataset, commit).
+//! - `draws`: several mapper draws (seeds) on one database, and the one kept: the most photos
+//!   among the draws whose camera centres agree with the photos' GPS.
 //! - `register`: a later survey's photos registered into a model `pose` kept, its poses fixed.
 //! - `workspace`: the photo folder and COLMAP workspace both share (photos, masks, arguments).
 //! - `exif`: the photos' focal length and GPS position.
@@ -16,6 +18,7 @@
 //! docs/POSE.md has the measurements that chose the engine and its settings.
 
 pub mod control;
+pub mod draws;
 pub mod engine;
 pub mod error;
 pub mod exif;

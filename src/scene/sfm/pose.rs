@@ -35,6 +35,7 @@ use crate::scene::sfm::SfmError;
 use crate::scene::sfm::control::{
     CONTROL_FIT_FILE, ControlFit, fit_control_points, read_control_points,
 };
+use crate::scene::sfm::draws::{MapperDraw, choose_draw};
 use crate::scene::sfm::engine::{Colmap, Engine};
 use crate::scene::sfm::exif::{PhotoExif, read_photo_exif};
 use crate::scene::sfm::georef::{Georeference, fit_gps};
@@ -143,6 +144,10 @@ pub struct PoseSummary {
     pub control_points: Option<ControlFit>,
     /// Why the dataset has no georeference, when it has none.
     pub georeference_note: Option<String>,
+    /// Every mapper draw (seed, registered photos, GPS residual), in the order run.
+    pub mapper_draws: Vec<MapperDraw>,
+    /// The seed of the draw kept (`draws::choose_draw`).
+    pub chosen_seed: Option<u64>,
     pub seconds: f64,
     /// Things the user should know (photos without EXIF, masks not used for matching).
     pub warnings: Vec<String>,
@@ -254,19 +259,21 @@ pub fn pose_photos(
     };
     step(matcher, &match_args)?;
     let sparse = work.join("sparse");
-    std::fs::create_dir_all(&sparse).map_err(|e| SceneError::io(&sparse, e))?;
-    let map_args = |init: &[&str]| {
+    let map_args = |init: &[&str], seed: Option<u64>, output: &Path| {
         let mut args = vec![
             arg("--database_path"),
             path_arg(&db),
             arg("--image_path"),
             path_arg(&images),
             arg("--output_path"),
-            path_arg(&sparse),
+            path_arg(output),
             arg("--Mapper.num_threads"),
             arg(&threads),
         ];
         args.extend(MAPPER_SETTINGS.iter().chain(init).map(|s| arg(s)));
+        if let Some(seed) = seed {
+            args.extend([arg("--Mapper.random_seed"), arg(&seed.to_string())]);
+        }
         args
     };
     let no_overlap = || {
@@ -279,34 +286,60 @@ pub fn pose_photos(
             ),
         ))
     };
-    // COLMAP 3.8's initial pair is a random search: on lund the same settings found it in one
-    // run and not in the next. Mapping is cheap next to matching, so a failed start is retried
-    // with looser initial-pair thresholds before the photos are called non-overlapping.
-    let mut mapped = false;
-    for init in INITIAL_PAIR_SETTINGS {
-        match step("mapper", &map_args(init)) {
-            Err(SfmError::EngineFailed { tail, .. }) if tail.contains("initial image pair") => {}
-            other => {
-                other?;
-                mapped = true;
-                break;
+    // The mapper is run once per seed (`mapper_seeds`), each draw into its own folder, and the
+    // draw whose centres agree with the photos' GPS and register the most photos is kept
+    // (`draws::choose_draw`; docs/POSE.md).
+    let mut draws = Vec::new();
+    let mut draw_components = Vec::new();
+    for &seed in mapper_seeds(colmap.engine()) {
+        let output = match seed {
+            Some(seed) => sparse.join(format!("seed-{seed}")),
+            None => sparse.clone(),
+        };
+        std::fs::create_dir_all(&output).map_err(|e| SceneError::io(&output, e))?;
+        // COLMAP 3.8's initial pair is a random search: on lund the same settings found it in
+        // one run and not in the next. Mapping is cheap next to matching, so a failed start is
+        // retried with looser initial-pair thresholds before the draw counts as empty.
+        let mut mapped = false;
+        for init in INITIAL_PAIR_SETTINGS {
+            match step("mapper", &map_args(init, seed, &output)) {
+                Err(SfmError::EngineFailed { tail, .. }) if tail.contains("initial image pair") => {
+                }
+                other => {
+                    other?;
+                    mapped = true;
+                    break;
+                }
             }
         }
+        let mut components = if mapped {
+            read_components(&output)?
+        } else {
+            Vec::new()
+        };
+        components.sort_by_key(|m| std::cmp::Reverse(m.images.len()));
+        draws.push(match components.first() {
+            Some(model) => MapperDraw::new(
+                seed,
+                model.images.len(),
+                georeference_from_gps(model, &files, &exif).0.as_ref(),
+                mean_error(model),
+            ),
+            None => MapperDraw::new(seed, 0, None, 0.0),
+        });
+        draw_components.push(components);
     }
-    if !mapped {
+    let Some(chosen) = choose_draw(&draws) else {
         return Err(no_overlap());
-    }
+    };
+    let components = std::mem::take(&mut draw_components[chosen]);
 
     progress(Progress {
         stage: Stage::Write,
         done: 0,
         total: 1,
     });
-    let mut components = read_components(&sparse)?;
-    components.sort_by_key(|m| std::cmp::Reverse(m.images.len()));
-    let Some(model) = components.first().filter(|m| m.images.len() >= 2) else {
-        return Err(no_overlap());
-    };
+    let model = &components[0];
     let registered: Vec<String> = model.images.iter().map(|i| i.name.clone()).collect();
     let unregistered: Vec<String> = files
         .iter()
@@ -339,6 +372,7 @@ pub fn pose_photos(
     if let Some(g) = &georeference {
         g.write(run.staging())?;
     }
+    let draws_chosen_seed = draws[chosen].seed;
     let summary = PoseSummary {
         engine: colmap.version(),
         matching,
@@ -351,6 +385,8 @@ pub fn pose_photos(
         georeference,
         control_points,
         georeference_note,
+        mapper_draws: draws,
+        chosen_seed: draws_chosen_seed,
         seconds: start.elapsed().as_secs_f64(),
         warnings,
     };
@@ -361,6 +397,16 @@ pub fn pose_photos(
 /// Mapper settings beyond COLMAP's defaults, chosen by measurement on the lund photos
 /// (docs/POSE.md).
 pub(super) const MAPPER_SETTINGS: &[&str] = &["--Mapper.ba_refine_principal_point", "0"];
+
+/// The mapper's seeds, one draw each. COLMAP 4 (pycolmap) takes `--Mapper.random_seed` and a
+/// draw costs 2–6 s of CPU on lund against 40–80 s for extraction and matching; COLMAP 3.8's
+/// CLI does not take the option (and its mapper repeated exactly on one database): one draw.
+fn mapper_seeds(engine: Engine) -> &'static [Option<u64>] {
+    match engine {
+        Engine::Pycolmap => &[Some(1), Some(2), Some(3), Some(4), Some(5)],
+        Engine::Colmap => &[None],
+    }
+}
 
 /// Initial-pair thresholds tried in turn. COLMAP 3.8's defaults (100 inliers, 16°) found no
 /// initial pair on lund; the first relaxed set registered all 29 photos within 0.3° of the
