@@ -1,12 +1,13 @@
 //! The loss on the GPU (`gpu::loss`) against the trainer's CPU loss
-//! (`train::loss::photometric_loss` + `label_loss`): L1 + D-SSIM and the label cross-entropy, their
+//! (`train::loss::photometric_loss` + `train::label_loss`): L1 + D-SSIM and the label cross-entropy, their
 //! value and their gradients with respect to the render, on a random image with and without a
 //! loss region, with supervised and unsupervised label channels. On lavapipe in CI.
 
 mod gpu_support;
 
 use damage_twin::gpu::loss::{GpuLoss, LossTarget, LossWeights};
-use damage_twin::train::loss::{LabelLossParams, LossWorkspace, label_loss, photometric_loss};
+use damage_twin::train::label_loss::{LabelLossParams, label_loss};
+use damage_twin::train::loss::{LossWorkspace, photometric_loss};
 use damage_twin::train::ssim::gaussian_window;
 
 const W: u32 = 53;

@@ -67,7 +67,7 @@ fn profile_gpu_step(
     let ctx = GpuContext::new()?;
     let mut backend = GpuBackend::new(&ctx)?;
     let targets = crate::train::spec::Targets::default();
-    let params = crate::train::loss::LabelLossParams::default();
+    let params = crate::train::label_loss::LabelLossParams::default();
     let no_labels: Vec<Option<&[u8]>> = vec![None; splats.label_channels];
     let resident = backend.profile_resident_step(
         splats,

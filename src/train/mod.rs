@@ -13,6 +13,7 @@ pub mod guards;
 pub mod history;
 pub mod importance;
 pub mod job;
+pub mod label_loss;
 pub mod light_fit;
 pub mod loss;
 pub mod plateau;

@@ -5,7 +5,8 @@
 use super::Trainer;
 use crate::raster::MAX_LABEL_CHANNELS;
 use crate::train::adam::ParamGroup;
-use crate::train::loss::{label_loss, photometric_loss};
+use crate::train::label_loss::label_loss;
+use crate::train::loss::photometric_loss;
 use crate::train::spec::DETACHED_LABEL_SCALE;
 
 impl Trainer {
