@@ -6,7 +6,7 @@
 //! the same model with the cache as without it.
 
 use damage_twin::raster::{
-    FrameFocus, PixelGrads, Rasterizer, RenderOutput, RenderSettings, SplatGrads, tile_grid,
+    FrameFocus, Rasterizer, RenderOutput, RenderSettings, SplatGrads, tile_grid,
 };
 use damage_twin::scene::{Camera, Mask, RgbImage};
 use damage_twin::splats::Splats;
@@ -15,7 +15,7 @@ use damage_twin::train::trainer::Trainer;
 use glam::Vec3;
 
 mod frame_support;
-use frame_support::{H, W, bits, camera, labelled_model};
+use frame_support::{H, W, bits, camera, labelled_model, seeded_backward};
 
 const LABELS: usize = 3;
 
@@ -52,17 +52,7 @@ fn frame(
     r.set_focus(focus);
     let mut out = RenderOutput::default();
     r.forward(s, cam, &settings, &mut out);
-    let mut rng = fastrand::Rng::with_seed(11);
-    let v_color: Vec<f32> = out.color.iter().map(|_| rng.f32() - 0.5).collect();
-    let v_labels: Vec<f32> = out.labels.iter().map(|_| rng.f32() - 0.5).collect();
-    let v = PixelGrads {
-        color: &v_color,
-        alpha: None,
-        depth: None,
-        labels: Some(&v_labels),
-    };
-    let mut grads = SplatGrads::zeros(s);
-    r.backward_pixels(s, cam, &settings, &v, &mut grads);
+    let grads = seeded_backward(r, s, cam, &settings, &out, |_| true);
     (out, grads)
 }
 

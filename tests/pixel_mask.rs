@@ -5,15 +5,14 @@
 //! zeros), in whole frames and in cached focused ones; and the mask really cuts the blending.
 
 use damage_twin::raster::{
-    FrameFocus, PixelGrads, Rasterizer, RenderOutput, RenderSettings, SplatGrads, pixel_rows,
-    tile_grid,
+    FrameFocus, Rasterizer, RenderOutput, RenderSettings, SplatGrads, pixel_rows, tile_grid,
 };
 use damage_twin::scene::Camera;
 use damage_twin::splats::Splats;
 use glam::Vec3;
 
 mod frame_support;
-use frame_support::{H, W, bits, camera, labelled_model};
+use frame_support::{H, W, bits, camera, labelled_model, seeded_backward};
 
 const LABELS: usize = 2;
 
@@ -59,28 +58,7 @@ fn frame(
     r.set_focus(focus);
     let mut out = RenderOutput::default();
     r.forward(s, cam, &settings, &mut out);
-    let mut rng = fastrand::Rng::with_seed(11);
-    let inside = |i: usize, per: usize| mask[i / per] != 0;
-    let v_color: Vec<f32> = (0..out.color.len())
-        .map(|i| if inside(i, 3) { rng.f32() - 0.5 } else { 0.0 })
-        .collect();
-    let v_labels: Vec<f32> = (0..out.labels.len())
-        .map(|i| {
-            if inside(i, LABELS) {
-                rng.f32() - 0.5
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    let v = PixelGrads {
-        color: &v_color,
-        alpha: None,
-        depth: None,
-        labels: Some(&v_labels),
-    };
-    let mut grads = SplatGrads::zeros(s);
-    r.backward_pixels(s, cam, &settings, &v, &mut grads);
+    let grads = seeded_backward(r, s, cam, &settings, &out, |p| mask[p] != 0);
     (out, grads)
 }
 
