@@ -9,8 +9,10 @@ mod twin_support;
 use damage_twin::damage::Palette;
 use damage_twin::damage::evaluate::DamageReadout;
 use damage_twin::damage::refine::{RefineConfig, Strategy};
+use damage_twin::scene::Camera;
 use damage_twin::scene::ImageScale;
-use damage_twin::splats::model::NO_SURVEY;
+use damage_twin::splats::Splats;
+use damage_twin::splats::model::{NO_SURVEY, logit, sigmoid};
 use damage_twin::timeline::Twin;
 use damage_twin::timeline::changes::{DetectConfig, OLD_DAMAGE_THRESHOLD, detect};
 use damage_twin::timeline::survey::AlignMode;
@@ -20,7 +22,15 @@ use damage_twin::train::job::JobOptions;
 #[test]
 fn detection_and_update_keep_the_history() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let (_, coarse) = twin_support::coarse_twin(dir.path(), 2);
+    let (_, mut coarse) = twin_support::coarse_twin(dir.path(), 2);
+    // Survey 2 flies where survey 1 did not: an opaque floater right in front of one of its
+    // training cameras, which no view of survey 1 constrained (as on the demo building).
+    let survey_two = damage_twin::scene::Dataset::open(
+        &dir.path().join("synth/survey-2"),
+        &damage_twin::scene::open::OpenOptions::default(),
+    )
+    .expect("opens survey 2");
+    let floater_id = put_floater(&mut coarse, &survey_two.views[1].camera);
 
     let mut twin = Twin::create(&dir.path().join("project")).expect("creates the project");
     twin.add_survey("2024", "2024-06-01", &dir.path().join("synth/survey-1"))
@@ -99,6 +109,7 @@ fn detection_and_update_keep_the_history() {
         },
         appearance: true,
         seeds: Some(damage_twin::timeline::seed::SeedConfig::default()),
+        clear_near_floaters: true,
     };
     let outcome = update_job(
         twin.clone(),
@@ -180,4 +191,48 @@ fn detection_and_update_keep_the_history() {
         "tags of survey 1's model are kept"
     );
     assert!(outcome.report.appearance.is_some(), "the light was fitted");
+
+    // The floater in front of survey 2's camera is cleared (it would otherwise stay, frozen, over
+    // the damage behind it), and the clearing is survey 2's change.
+    assert!(outcome.report.near_floaters_cleared >= 1);
+    let floater = updated
+        .meta
+        .ids
+        .iter()
+        .position(|&id| id == floater_id)
+        .expect("the floater keeps its place");
+    assert!(
+        sigmoid(updated.raw_opacities[floater]) < 0.01,
+        "the near floater is cleared: opacity {}",
+        sigmoid(updated.raw_opacities[floater])
+    );
+    assert_eq!(updated.meta.survey[floater], 1);
+}
+
+/// Appends an opaque, undamaged Gaussian a tenth of the median depth in front of `camera`, wide
+/// enough to cover much of its view. Returns its id.
+fn put_floater(model: &mut Splats, camera: &Camera) -> u64 {
+    let mut depths: Vec<f32> = model
+        .means
+        .iter()
+        .map(|&m| camera.world_to_camera(m).z)
+        .filter(|&z| z > 0.0)
+        .collect();
+    depths.sort_by(f32::total_cmp);
+    let depth = 0.1 * depths[depths.len() / 2];
+    let mean = camera.position() + camera.rotation.inverse() * glam::Vec3::new(0.0, 0.0, depth);
+    let id = model.meta.ids.iter().max().map_or(0, |&m| m + 1);
+    let sh = vec![0.0; model.sh_coeffs() * 3];
+    let labels = vec![logit(0.01); model.label_channels];
+    model.push(
+        mean,
+        glam::Vec3::splat((0.3 * depth).ln()),
+        glam::Quat::IDENTITY,
+        logit(0.95),
+        &sh,
+        &labels,
+        id,
+        0,
+    );
+    id
 }

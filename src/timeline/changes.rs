@@ -361,7 +361,7 @@ pub fn without_near_floaters<'a>(twin: &'a Splats, camera: &Camera) -> Cow<'a, S
 }
 
 /// Per Gaussian, whether it is a floater in front of `camera` (see `without_near_floaters`).
-fn near_floaters(twin: &Splats, camera: &Camera) -> Vec<bool> {
+pub(crate) fn near_floaters(twin: &Splats, camera: &Camera) -> Vec<bool> {
     let depths: Vec<f32> = twin
         .means
         .iter()

@@ -37,6 +37,10 @@ pub struct Args {
     /// Do not seed Gaussians for new damage before training (`timeline::seed`).
     #[arg(long)]
     pub no_seeds: bool,
+    /// Keep the earlier twin's near floaters of the new survey's cameras (frozen) instead of
+    /// clearing them before training (docs/TIMELINE.md).
+    #[arg(long)]
+    pub keep_near_floaters: bool,
     /// A factor on the position, scale, rotation and opacity rates of the trained Gaussians that
     /// are only neighbours of damage; damage and seeds learn at full rates (0: full for all).
     #[arg(long, default_value_t = damage_twin::timeline::update::NEIGHBOUR_GEOMETRY_RATE)]
@@ -92,6 +96,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.no_seeds {
         config.seeds = None;
     }
+    config.clear_near_floaters = !args.keep_near_floaters;
     if args.gentle_rates {
         config.refine.lr = damage_twin::timeline::update::gentle_learning_rates();
     }
