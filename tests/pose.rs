@@ -488,6 +488,17 @@ fn when_every_draw_is_far_from_the_gps_more_seeds_run_then_a_warning_says_so() {
     assert!(err.contains("after 15 draws"), "{err}");
     let printed = String::from_utf8_lossy(&out.stdout);
     assert!(printed.contains("too large for a right model"), "{printed}");
+    // The twin and its report read the doubt from the georeference.
+    let georef: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("ds/georef.json")).unwrap())
+            .unwrap();
+    assert!(
+        georef["model_doubt"]
+            .as_str()
+            .unwrap()
+            .starts_with("no mapper draw agrees"),
+        "{georef}"
+    );
     let warnings = summary["warnings"].as_array().unwrap();
     assert!(
         warnings
@@ -523,6 +534,8 @@ fn when_every_first_draw_is_far_from_the_gps_a_later_seed_that_agrees_is_kept() 
     );
     assert_eq!(summary["chosen_seed"], 8, "{draws:?}");
     assert_eq!(summary["gps_plausible"], true, "{draws:?}");
+    let georef = std::fs::read_to_string(dir.path().join("ds/georef.json")).unwrap();
+    assert!(!georef.contains("model_doubt"), "{georef}");
     assert!(stderr(&out).is_empty(), "{}", stderr(&out));
 }
 

@@ -38,7 +38,7 @@ use crate::scene::sfm::control::{
 use crate::scene::sfm::draws::{GPS_PLAUSIBLE_FRACTION, MapperDraw, choose_draw};
 use crate::scene::sfm::engine::{Colmap, Engine};
 use crate::scene::sfm::exif::{PhotoExif, read_photo_exif};
-use crate::scene::sfm::georef::{Georeference, fit_gps};
+use crate::scene::sfm::georef::{GeorefSource, Georeference, fit_gps};
 use crate::scene::sfm::progress::{Progress, Stage};
 use crate::scene::sfm::workspace::{
     check_target, copy_masks, extract_args, failed_log_path, file_name, focal_prior,
@@ -350,21 +350,24 @@ pub fn pose_photos(
         return Err(no_overlap());
     };
     let gps_plausible = draws[chosen].gps_plausible();
-    if gps_plausible == Some(false) {
+    let model_doubt = (gps_plausible == Some(false)).then(|| {
         let draw = &draws[chosen];
-        warnings.push(format!(
-            "no mapper draw agrees with the photos' GPS: the kept one (seed {}, {} photos) is \
-             {:.1} m RMS off its GPS fixes over a {:.1} m baseline ({:.0} %, plausible up to {:.0} \
-             %) after {} draws: the poses may be wrong; check them, or pose again",
-            draw.seed.map_or("none".into(), |s| s.to_string()),
-            draw.registered,
+        let (rms, baseline) = (
             draw.gps_rms_m.unwrap_or(f64::NAN),
             draw.gps_baseline_m.unwrap_or(f64::NAN),
-            100.0 * draw.gps_rms_m.unwrap_or(f64::NAN) / draw.gps_baseline_m.unwrap_or(f64::NAN),
+        );
+        format!(
+            "no mapper draw agrees with the photos' GPS: the kept one (seed {}, {} photos) is \
+             {rms:.1} m RMS off its GPS fixes over a {baseline:.1} m baseline ({:.0} %, plausible \
+             up to {:.0} %) after {} draws: the poses may be wrong; check them, or pose again",
+            draw.seed.map_or("none".into(), |s| s.to_string()),
+            draw.registered,
+            100.0 * rms / baseline,
             100.0 * GPS_PLAUSIBLE_FRACTION,
             draws.len()
-        ));
-    }
+        )
+    });
+    warnings.extend(model_doubt.clone());
     let components = std::mem::take(&mut draw_components[chosen]);
 
     progress(Progress {
@@ -402,6 +405,13 @@ pub fn pose_photos(
         }
         None => None,
     };
+    if let Some(g) = georeference
+        .as_mut()
+        .filter(|g| g.source == GeorefSource::Gps)
+    {
+        // The twin and its report read the doubt from `georef.json`.
+        g.model_doubt = model_doubt;
+    }
     if let Some(g) = &georeference {
         g.write(run.staging())?;
     }
