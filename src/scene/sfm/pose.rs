@@ -304,11 +304,13 @@ pub fn pose_photos(
         // retried with looser initial-pair thresholds before the draw counts as empty.
         let mut mapped = false;
         for init in INITIAL_PAIR_SETTINGS {
-            match step("mapper", &map_args(init, seed, &output)) {
+            // Not `step`: a start the retry or the next seed answers is no failure of the run,
+            // and must not leave a `NAME.pose-failed.log` beside a dataset that was made.
+            match colmap.run("mapper", &map_args(init, seed, &output), &log, n, progress) {
                 Err(SfmError::EngineFailed { tail, .. }) if tail.contains("initial image pair") => {
                 }
                 other => {
-                    other?;
+                    other.map_err(keep_log)?;
                     mapped = true;
                     break;
                 }
