@@ -269,6 +269,7 @@ fn add_survey_from_photos_registers_them_and_the_panel_shows_the_records() {
         rejected: Vec::new(),
         baseline_m: 40.0,
         scale_uncertainty: 0.05,
+        model_doubt: None,
     };
     georef.write(&setup.path("s1")).unwrap();
     let mut state = viewer_on_project(&setup);

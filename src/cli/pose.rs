@@ -148,14 +148,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match (&summary.georeference, &summary.georeference_note) {
         (Some(g), _) => println!(
             "georeferenced from {:?}: {:.4} m per unit, residual {:.2} m RMS over {} positions \
-             ({} rejected), baseline {:.1} m, scale good to ±{:.1} %",
+             ({} rejected), baseline {:.1} m, scale good to ±{:.1} %{}",
             g.source,
             g.metres_per_unit(),
             g.rms_m,
             g.used.len(),
             g.rejected.len(),
             g.baseline_m,
-            100.0 * g.scale_uncertainty
+            100.0 * g.scale_uncertainty,
+            if g.source == sfm::GeorefSource::Gps && summary.gps_plausible == Some(false) {
+                " (too large for a right model: see the warning)"
+            } else {
+                ""
+            }
         ),
         (None, Some(note)) => println!("no georeference: {note}"),
         (None, None) => {}

@@ -84,8 +84,12 @@ impl TwinGeoreference {
             "do not trust lengths from this scale: the positions scatter too much for their \
              baseline; add control points or set the scale from a measured distance"
         };
+        let doubt = g
+            .model_doubt
+            .as_ref()
+            .map_or(String::new(), |why| format!("Warning: {why}. "));
         format!(
-            "Metres and coordinates come from {source} ({n} positions, {r:.2} m RMS residual, \
+            "{doubt}Metres and coordinates come from {source} ({n} positions, {r:.2} m RMS residual, \
              {b:.1} m baseline; survey {s}): the scale is good to ±{percent:.1} % (1σ, residual \
              over baseline and √n), so a 1 m length carries ±{mm:.0} mm from the scale alone; \
              {verdict}. Positions (latitude, longitude, height) are good to about {r:.1} m, \
@@ -143,6 +147,7 @@ mod tests {
             rejected: Vec::new(),
             baseline_m: 50.0,
             scale_uncertainty: 4.0 / (50.0 * 5.0),
+            model_doubt: None,
         }
     }
 
@@ -180,5 +185,17 @@ mod tests {
         let p = plain.geodetic(dataset_point).unwrap();
         assert_eq!((p.latitude, p.longitude, p.height_m), expected);
         assert!(plain.trust().contains("±1.6 %"), "{}", plain.trust());
+        assert!(!plain.trust().contains("Warning"), "{}", plain.trust());
+        // A model `pose` doubted says so first.
+        let mut doubted = georef(to_enu);
+        doubted.model_doubt = Some("no mapper draw agrees with the photos' GPS".into());
+        let doubted = TwinGeoreference::new("s1".into(), doubted, None);
+        assert!(
+            doubted
+                .trust()
+                .starts_with("Warning: no mapper draw agrees with the photos' GPS. Metres"),
+            "{}",
+            doubted.trust()
+        );
     }
 }

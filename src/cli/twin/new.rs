@@ -68,6 +68,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             georef.metres_per_unit(),
             georef.rms_m
         );
+        if let Some(why) = &georef.model_doubt {
+            eprintln!("warning: the dataset's poses are in doubt: {why}");
+        }
     }
     let (mut model, trained) = match &args.model {
         Some(path) => (read_model(path)?, None),

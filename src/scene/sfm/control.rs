@@ -379,6 +379,7 @@ pub fn fit_control_points(
             rejected: Vec::new(),
             baseline_m,
             scale_uncertainty: rms_m / (baseline_m.max(1e-9) * (fit_count as f64).sqrt()),
+            model_doubt: None,
         },
         check_rms_m: rms(true),
         points: residuals,

@@ -53,6 +53,11 @@ pub struct Georeference {
     /// Relative 1-sigma uncertainty of the scale, `rms / (baseline · √n)`: the residual spread
     /// over the baseline and the number of positions.
     pub scale_uncertainty: f64,
+    /// Why the posed model itself is in doubt, when it is: `pose` kept a mapper draw whose GPS
+    /// residual is too large for a right model (`draws::GPS_PLAUSIBLE_FRACTION`). Absent in
+    /// files written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_doubt: Option<String>,
 }
 
 impl Georeference {
@@ -246,6 +251,7 @@ pub fn fit_gps(centres: &[(String, DVec3, DVec3, GpsPosition)]) -> Result<Georef
             .collect(),
         baseline_m: baseline,
         scale_uncertainty: rms / (baseline * (trimmed.kept.len() as f64).sqrt()),
+        model_doubt: None,
     })
 }
 

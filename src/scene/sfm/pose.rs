@@ -35,10 +35,10 @@ use crate::scene::sfm::SfmError;
 use crate::scene::sfm::control::{
     CONTROL_FIT_FILE, ControlFit, fit_control_points, read_control_points,
 };
-use crate::scene::sfm::draws::{MapperDraw, choose_draw};
+use crate::scene::sfm::draws::{GPS_PLAUSIBLE_FRACTION, MapperDraw, choose_draw};
 use crate::scene::sfm::engine::{Colmap, Engine};
 use crate::scene::sfm::exif::{PhotoExif, read_photo_exif};
-use crate::scene::sfm::georef::{Georeference, fit_gps};
+use crate::scene::sfm::georef::{GeorefSource, Georeference, fit_gps};
 use crate::scene::sfm::progress::{Progress, Stage};
 use crate::scene::sfm::workspace::{
     check_target, copy_masks, extract_args, failed_log_path, file_name, focal_prior,
@@ -148,6 +148,10 @@ pub struct PoseSummary {
     pub mapper_draws: Vec<MapperDraw>,
     /// The seed of the draw kept (`draws::choose_draw`).
     pub chosen_seed: Option<u64>,
+    /// Whether the kept draw's GPS residual is plausible for a right model
+    /// (`draws::GPS_PLAUSIBLE_FRACTION` of the GPS baseline); `None` without a GPS fit. `false`
+    /// comes with a warning: every draw may be wrong.
+    pub gps_plausible: Option<bool>,
     pub seconds: f64,
     /// Things the user should know (photos without EXIF, masks not used for matching).
     pub warnings: Vec<String>,
@@ -289,9 +293,7 @@ pub fn pose_photos(
     // The mapper is run once per seed (`mapper_seeds`), each draw into its own folder, and the
     // draw whose centres agree with the photos' GPS and register the most photos is kept
     // (`draws::choose_draw`; docs/POSE.md).
-    let mut draws = Vec::new();
-    let mut draw_components = Vec::new();
-    for &seed in mapper_seeds(colmap.engine()) {
+    let run_draw = |seed: Option<u64>| -> Result<(MapperDraw, Vec<ColmapModel>), SfmError> {
         let output = match seed {
             Some(seed) => sparse.join(format!("seed-{seed}")),
             None => sparse.clone(),
@@ -302,11 +304,13 @@ pub fn pose_photos(
         // retried with looser initial-pair thresholds before the draw counts as empty.
         let mut mapped = false;
         for init in INITIAL_PAIR_SETTINGS {
-            match step("mapper", &map_args(init, seed, &output)) {
+            // Not `step`: a start the retry or the next seed answers is no failure of the run,
+            // and must not leave a `NAME.pose-failed.log` beside a dataset that was made.
+            match colmap.run("mapper", &map_args(init, seed, &output), &log, n, progress) {
                 Err(SfmError::EngineFailed { tail, .. }) if tail.contains("initial image pair") => {
                 }
                 other => {
-                    other?;
+                    other.map_err(keep_log)?;
                     mapped = true;
                     break;
                 }
@@ -318,7 +322,7 @@ pub fn pose_photos(
             Vec::new()
         };
         components.sort_by_key(|m| std::cmp::Reverse(m.images.len()));
-        draws.push(match components.first() {
+        let draw = match components.first() {
             Some(model) => MapperDraw::new(
                 seed,
                 model.images.len(),
@@ -326,12 +330,46 @@ pub fn pose_photos(
                 mean_error(model),
             ),
             None => MapperDraw::new(seed, 0, None, 0.0),
-        });
+        };
+        Ok((draw, components))
+    };
+    let (first_seeds, more_seeds) = mapper_seeds(colmap.engine());
+    let mut draws = Vec::new();
+    let mut draw_components = Vec::new();
+    let kept_is_implausible = |draws: &[MapperDraw]| {
+        choose_draw(draws).and_then(|i| draws[i].gps_plausible()) == Some(false)
+    };
+    for &seed in first_seeds.iter().chain(more_seeds) {
+        // The further seeds only while the kept draw's GPS residual is implausible.
+        if draws.len() >= first_seeds.len() && !kept_is_implausible(&draws) {
+            break;
+        }
+        let (draw, components) = run_draw(seed)?;
+        draws.push(draw);
         draw_components.push(components);
     }
     let Some(chosen) = choose_draw(&draws) else {
         return Err(no_overlap());
     };
+    let gps_plausible = draws[chosen].gps_plausible();
+    let model_doubt = (gps_plausible == Some(false)).then(|| {
+        let draw = &draws[chosen];
+        let (rms, baseline) = (
+            draw.gps_rms_m.unwrap_or(f64::NAN),
+            draw.gps_baseline_m.unwrap_or(f64::NAN),
+        );
+        format!(
+            "no mapper draw agrees with the photos' GPS: the kept one (seed {}, {} photos) is \
+             {rms:.1} m RMS off its GPS fixes over a {baseline:.1} m baseline ({:.0} %, plausible \
+             up to {:.0} %) after {} draws: the poses may be wrong; check them, or pose again",
+            draw.seed.map_or("none".into(), |s| s.to_string()),
+            draw.registered,
+            100.0 * rms / baseline,
+            100.0 * GPS_PLAUSIBLE_FRACTION,
+            draws.len()
+        )
+    });
+    warnings.extend(model_doubt.clone());
     let components = std::mem::take(&mut draw_components[chosen]);
 
     progress(Progress {
@@ -369,6 +407,13 @@ pub fn pose_photos(
         }
         None => None,
     };
+    if let Some(g) = georeference
+        .as_mut()
+        .filter(|g| g.source == GeorefSource::Gps)
+    {
+        // The twin and its report read the doubt from `georef.json`.
+        g.model_doubt = model_doubt;
+    }
     if let Some(g) = &georeference {
         g.write(run.staging())?;
     }
@@ -387,6 +432,7 @@ pub fn pose_photos(
         georeference_note,
         mapper_draws: draws,
         chosen_seed: draws_chosen_seed,
+        gps_plausible,
         seconds: start.elapsed().as_secs_f64(),
         warnings,
     };
@@ -398,13 +444,29 @@ pub fn pose_photos(
 /// (docs/POSE.md).
 pub(super) const MAPPER_SETTINGS: &[&str] = &["--Mapper.ba_refine_principal_point", "0"];
 
-/// The mapper's seeds, one draw each. COLMAP 4 (pycolmap) takes `--Mapper.random_seed` and a
-/// draw costs 2–6 s of CPU on lund against 40–80 s for extraction and matching; COLMAP 3.8's
-/// CLI does not take the option (and its mapper repeated exactly on one database): one draw.
-fn mapper_seeds(engine: Engine) -> &'static [Option<u64>] {
+/// The mapper's seeds, one draw each: the ones always run, then the ones run one by one while
+/// the kept draw's GPS residual is implausible (`MapperDraw::gps_plausible`). COLMAP 4
+/// (pycolmap) takes `--Mapper.random_seed` and a draw costs 2–6 s of CPU on lund against 40–80 s
+/// for extraction and matching, so ten more draws at most add about as much again, and only when
+/// the first five are all in doubt (on lund, one run of five); COLMAP 3.8's CLI does not take
+/// the option (and its mapper repeated exactly on one database): one draw.
+fn mapper_seeds(engine: Engine) -> (&'static [Option<u64>], &'static [Option<u64>]) {
+    const FIRST: &[Option<u64>] = &[Some(1), Some(2), Some(3), Some(4), Some(5)];
+    const MORE: &[Option<u64>] = &[
+        Some(6),
+        Some(7),
+        Some(8),
+        Some(9),
+        Some(10),
+        Some(11),
+        Some(12),
+        Some(13),
+        Some(14),
+        Some(15),
+    ];
     match engine {
-        Engine::Pycolmap => &[Some(1), Some(2), Some(3), Some(4), Some(5)],
-        Engine::Colmap => &[None],
+        Engine::Pycolmap => (FIRST, MORE),
+        Engine::Colmap => (&[None], &[]),
     }
 }
 
