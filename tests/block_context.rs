@@ -112,7 +112,7 @@ fn a_block_renders_the_context_frozen_and_the_merge_keeps_it_outside_every_box()
     );
     assert_eq!(outcome.record.context_gaussians, Some(frozen.len()));
     let own = &outcome.splats;
-    assert!(own.len() > 0);
+    assert!(!own.is_empty());
     assert!(
         (0..own.len()).all(|g| !outside_block.contains(&bits(own, g))),
         "a context Gaussian is in the block's own result"
