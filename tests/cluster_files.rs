@@ -178,6 +178,7 @@ fn command() -> JobCommand {
         plan_dir: PathBuf::from("/shared/bridge/plan"),
         threads: Some(8),
         finish: None,
+        context: false,
     }
 }
 
@@ -323,4 +324,100 @@ fn the_slurm_array_covers_every_block_and_the_merge_waits_for_it() {
             .mode();
         assert_eq!(mode & 0o111, 0o111);
     }
+}
+
+#[test]
+fn a_plan_with_a_context_runs_its_context_job_before_the_blocks() {
+    let with_context = JobCommand {
+        context: true,
+        ..command()
+    };
+    // Kubernetes: a one-pod context Job, a valid batch/v1 Job running `train-block --context`,
+    // applied and waited for before the blocks.
+    let dir = tempfile::tempdir().unwrap();
+    let paths = write_k8s(
+        dir.path(),
+        &with_context,
+        3,
+        &settings(),
+        Path::new("/shared/m"),
+    )
+    .unwrap();
+    let job = valid_job(&std::fs::read_to_string(paths.context.as_ref().unwrap()).unwrap());
+    assert_eq!(job.spec.completions, Some(1));
+    assert_eq!(job.spec.completion_mode, None);
+    assert_eq!(
+        job.spec.template.spec.containers[0].command,
+        [
+            "/shared/bin/damage-twin",
+            "train-block",
+            "/shared/bridge/plan",
+            "--context",
+            "--quiet",
+            "--threads",
+            "8"
+        ]
+    );
+    let apply = std::fs::read_to_string(&paths.apply).unwrap();
+    let at = |what: &str| {
+        apply
+            .find(what)
+            .unwrap_or_else(|| panic!("{what} not in {apply}"))
+    };
+    assert!(at("context-job.json") < at("job/bridge-context"));
+    assert!(at("job/bridge-context") < at("blocks-job.json"));
+    assert!(at("blocks-job.json") < at("job/bridge-blocks"));
+    assert!(at("job/bridge-blocks") < at("merge-job.json"));
+    // Without a context there is no context Job.
+    let plain = tempfile::tempdir().unwrap();
+    let paths = write_k8s(plain.path(), &command(), 3, &settings(), Path::new("/m")).unwrap();
+    assert!(paths.context.is_none() && !plain.path().join("context-job.json").exists());
+    let apply = std::fs::read_to_string(&paths.apply).unwrap();
+    assert!(!apply.contains("context-job.json") && !apply.contains("job/bridge-context"));
+
+    // Slurm: a context script, submitted first; the array depends on it, the merge on the array.
+    let resources = SlurmResources {
+        job_name: "bridge".into(),
+        cpus: 4,
+        mem_gb: 8,
+        time: "01:00:00".into(),
+        partition: None,
+    };
+    let logs = Path::new("/shared/bridge/plan/logs");
+    let scripts = slurm_scripts(&with_context, 3, &resources, Path::new("/shared/m"), logs);
+    let context = scripts.context.as_ref().expect("a context script");
+    assert!(context.contains("#SBATCH --output=/shared/bridge/plan/logs/context.out"));
+    assert!(!context.contains("--array"));
+    assert!(context.contains(
+        "exec /shared/bin/damage-twin train-block /shared/bridge/plan --context --quiet --threads 8"
+    ));
+    let submit = &scripts.submit;
+    assert!(
+        submit.contains("sbatch --parsable \"$here/context.sbatch\"")
+            && submit.contains(
+                "sbatch --parsable --dependency=afterok:\"$context\" \"$here/blocks.sbatch\""
+            )
+            && submit.contains(
+                "sbatch --parsable --dependency=afterok:\"$blocks\" \"$here/merge.sbatch\""
+            ),
+        "{submit}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let written = write_slurm(
+        &dir.path().join("slurm"),
+        &scripts,
+        &dir.path().join("logs"),
+    )
+    .unwrap();
+    assert_eq!(
+        std::fs::read_to_string(written.context.unwrap()).unwrap(),
+        *context
+    );
+    let plain = slurm_scripts(&command(), 3, &resources, Path::new("/shared/m"), logs);
+    assert!(plain.context.is_none() && !plain.submit.contains("context.sbatch"));
+    assert!(
+        plain
+            .submit
+            .contains("blocks=\"$(sbatch --parsable \"$here/blocks.sbatch\")\"")
+    );
 }

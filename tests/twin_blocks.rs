@@ -255,3 +255,51 @@ fn a_partitioned_twin_updates_only_its_changed_blocks() {
         "the killed-and-rerun update gives another model"
     );
 }
+
+#[test]
+fn a_partitioned_twin_with_a_context_updates_its_changed_blocks_without_one() {
+    // The twin's model merged from blocks trained with a context; the update's plan drops the
+    // context (it is of survey 1's photos), trains block 1 on survey 2 alone and keeps block 0's
+    // part of the model — the context's Gaussians there with it — as it was.
+    let root = tempfile::tempdir().unwrap();
+    let bridge = tiny_bridge(root.path());
+    let plan = root.path().join("plan");
+    let mut partition = binary();
+    partition
+        .arg("partition")
+        .arg(bridge.join("survey-1"))
+        .arg("--out")
+        .arg(&plan)
+        .args(["--blocks", "2", "--iters", "60", "--seed", "5"])
+        .args(["--context-iters", "40", "--context-scale", "2"]);
+    run(partition);
+    let merged = root.path().join("merged");
+    cluster_local_two_workers(&plan, &merged);
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(merged.join("merge.json")).unwrap()).unwrap();
+    assert!(report["context"]["kept"].as_u64() > Some(0), "{report}");
+    let dir = project(root.path(), "twin", &bridge, &plan, &merged);
+    let mut detect = binary();
+    detect
+        .args(["twin", "detect"])
+        .arg(&dir)
+        .args(["--survey", "survey-2", "--json"]);
+    run(detect);
+    run(update(&dir, "1"));
+    let plan2 = load_plan(&dir.join("blocks/survey-2")).unwrap();
+    assert!(plan2.context.is_none());
+    assert!(plan2.blocks[0].skipped.is_some());
+    let before = read_splats(&dir.join("surveys/survey-1/model.ply")).unwrap();
+    let after = read_splats(&dir.join("surveys/survey-2/model.ply")).unwrap();
+    let first = load_plan(&plan).unwrap();
+    assert!(first.context.is_some());
+    let kept = block_part(&before, &first, 0);
+    assert!(
+        (0..before.len()).any(|g| {
+            let p = first.frame.coordinates(before.means[g]);
+            first.keeps(0, p.x) && !first.in_structure(p)
+        }),
+        "no context Gaussian lies in block 0's part"
+    );
+    assert_eq!(block_part(&after, &first, 0), kept);
+}

@@ -13,6 +13,8 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
+use crate::blocks::context_run::{context_model_path, read_context};
+use crate::blocks::merge::append_where;
 use crate::blocks::plan::Plan;
 use crate::blocks::region::{block_pixels, inside_block};
 use crate::damage::Palette;
@@ -55,6 +57,9 @@ pub struct BlockRecord {
     pub region_fraction: f64,
     /// Peak resident memory of the process that trained it (None where not measured).
     pub peak_rss_mb: Option<f64>,
+    /// The context Gaussians it rendered frozen (None: trained without a context).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub context_gaussians: Option<usize>,
 }
 
 /// The record of block `k`'s result when it is finished for this plan (its model beside it):
@@ -69,16 +74,21 @@ pub fn finished(plan_dir: &Path, plan: &Plan, k: usize) -> Option<BlockRecord> {
 
 /// A trained block.
 pub struct BlockOutcome {
+    /// The block's own Gaussians (what its `model.ply` holds).
     pub splats: Arc<Splats>,
+    /// The context Gaussians it rendered frozen, as the run left them (None: no context).
+    pub context: Option<Splats>,
     pub record: BlockRecord,
     pub cancelled: bool,
 }
 
-/// Trains block `k` of `plan` on `dataset` (the plan's dataset, opened).
+/// Trains block `k` of `plan` (loaded from the folder `plan_dir`, where a context's result is
+/// read from) on `dataset` (the plan's dataset, opened).
 pub fn train_block(
     ctx: &mut JobContext,
     dataset: &Dataset,
     plan: &Plan,
+    plan_dir: &Path,
     k: usize,
 ) -> Result<BlockOutcome, JobError> {
     let started = Instant::now();
@@ -91,6 +101,12 @@ pub fn train_block(
     if let Some(why) = &block.skipped {
         return Err(JobError::Invalid(format!("block {k} is skipped: {why}")));
     }
+    // The context first: a block of a plan whose context has not finished fails before it
+    // loads anything.
+    let context = match &plan.context {
+        Some(_) => Some(read_context(plan_dir, plan)?),
+        None => None,
+    };
     let indices = block
         .photos
         .iter()
@@ -107,19 +123,8 @@ pub fn train_block(
     let scale = training
         .image_scale()
         .ok_or_else(|| JobError::Invalid(format!("bad scale {:?}", training.scale)))?;
-    let mode = effective_mode(dataset, training.mode);
     let steps = training.steps_for(indices.len());
-    let config = RunConfig {
-        mode,
-        scale,
-        iterations: steps,
-        sh_degree: training.sh_degree,
-        seed: training.seed,
-        background: glam::Vec3::from_array(training.background),
-        ..RunConfig::default()
-    };
-
-    // Its photos, in the model's light (no survey light here), as targets of the mode.
+    let config = run_config(dataset, plan, scale, steps);
     let lights = ViewLights::new();
     let focus = Focus {
         dataset,
@@ -127,16 +132,15 @@ pub fn train_block(
         lights: &lights,
         margin_px: CROP_MARGIN_PX,
     };
-    let palette = Palette::default();
-    let targets = move |views: &mut [TrainView]| apply_mode(views, mode, &palette);
-    let views = focus.load(&indices, mode.uses_masks(), &targets)?;
+    let views = load_photos(&focus, &config, &indices)?;
+    let mode = config.mode;
 
     // Its Gaussians: the initial model cut to the enlarged box, every one trainable.
     let (mut splats, mut spec) = model_and_spec(dataset, &views, &config, mode)?;
     let keep: Vec<bool> = splats
         .means
         .iter()
-        .map(|&p| plan.trains_on(k, plan.frame.coordinates(p).x))
+        .map(|&p| plan.trains_point(k, plan.frame.coordinates(p)))
         .collect();
     splats.retain(&keep);
     if splats.is_empty() {
@@ -204,6 +208,20 @@ pub fn train_block(
     let region_fraction = region_pixels / crops.len() as f64;
     drop(hulls);
     spec.iterations = steps;
+    // With a context, the context's Gaussians outside the block's box render frozen behind and
+    // around its own: its photos' sky and the rest of the scene are explained, and only its own
+    // Gaussians learn.
+    let frozen = match context {
+        Some(context) => Some(add_frozen_context(
+            &mut splats,
+            &mut spec,
+            plan,
+            k,
+            &context,
+            &context_model_path(plan_dir),
+        )?),
+        None => None,
+    };
     let outcome = run_training(
         ctx,
         TrainSetup {
@@ -214,21 +232,98 @@ pub fn train_block(
         },
         "block",
     )?;
+    let (splats, context) = match frozen {
+        Some(ids) => {
+            let (own, context) = split_ids(&outcome.splats, ids);
+            (Arc::new(own), Some(context))
+        }
+        None => (outcome.splats, None),
+    };
     let record = BlockRecord {
         plan_digest: plan.digest(),
         block: k,
         photos: indices.len(),
         steps: outcome.steps,
-        gaussians: outcome.splats.len(),
+        gaussians: splats.len(),
         seconds: started.elapsed().as_secs_f64(),
         region_fraction,
         peak_rss_mb: None,
+        context_gaussians: context.as_ref().map(Splats::len),
     };
     Ok(BlockOutcome {
-        splats: outcome.splats,
+        splats,
+        context,
         record,
         cancelled: outcome.cancelled,
     })
+}
+
+/// The run settings of a plan's job at `scale` for `steps` steps.
+pub(crate) fn run_config(
+    dataset: &Dataset,
+    plan: &Plan,
+    scale: crate::scene::ImageScale,
+    steps: u32,
+) -> RunConfig {
+    let training = &plan.training;
+    RunConfig {
+        mode: effective_mode(dataset, training.mode),
+        scale,
+        iterations: steps,
+        sh_degree: training.sh_degree,
+        seed: training.seed,
+        background: glam::Vec3::from_array(training.background),
+        ..RunConfig::default()
+    }
+}
+
+/// The photos `indices` in the model's light (no survey light here), as targets of the mode.
+pub(crate) fn load_photos(
+    focus: &Focus,
+    config: &RunConfig,
+    indices: &[usize],
+) -> Result<Vec<TrainView>, JobError> {
+    let mode = config.mode;
+    let palette = Palette::default();
+    let targets = move |views: &mut [TrainView]| apply_mode(views, mode, &palette);
+    Ok(focus.load(indices, mode.uses_masks(), &targets)?)
+}
+
+/// Appends to `splats` (block `k`'s own Gaussians, all trainable) the `context`'s Gaussians
+/// (read from `source`) that lie outside the block's box, frozen (`spec.trainable`), with ids
+/// after the block's own. Returns the range of ids they were given.
+fn add_frozen_context(
+    splats: &mut Splats,
+    spec: &mut crate::train::spec::TrainSpec,
+    plan: &Plan,
+    k: usize,
+    context: &Splats,
+    source: &Path,
+) -> Result<std::ops::Range<u64>, JobError> {
+    let own = splats.len();
+    let first = splats.meta.next_id();
+    let mut into = Some(std::mem::take(splats));
+    append_where(&mut into, context, source, |p| {
+        !plan.trains_point(k, plan.frame.coordinates(p))
+    })?;
+    *splats = into.unwrap_or_default();
+    for (i, id) in splats.meta.ids.iter_mut().enumerate().skip(own) {
+        *id = first + (i - own) as u64;
+    }
+    let mut trainable = vec![true; splats.len()];
+    trainable[own..].fill(false);
+    spec.trainable = Some(trainable);
+    Ok(first..first + (splats.len() - own) as u64)
+}
+
+/// `splats` split into the Gaussians whose ids lie outside `ids` and those inside.
+fn split_ids(splats: &Splats, ids: std::ops::Range<u64>) -> (Splats, Splats) {
+    let inside: Vec<bool> = splats.meta.ids.iter().map(|id| ids.contains(id)).collect();
+    let mut context = splats.clone();
+    context.retain(&inside);
+    let mut own = splats.clone();
+    own.retain(&inside.iter().map(|&i| !i).collect::<Vec<bool>>());
+    (own, context)
 }
 
 /// Begins block `k`'s result folder: what dead runs left beside it is removed, and an
@@ -240,9 +335,20 @@ pub fn begin_result(plan_dir: &Path, k: usize) -> Result<RunFolder, SceneError> 
 /// Writes a trained block into its begun result folder and puts it in place, the model first
 /// and the record last (a record always describes the model beside it).
 pub fn commit_result(folder: RunFolder, outcome: &BlockOutcome) -> Result<(), SceneError> {
-    crate::splats::ply::write_splats(&folder.path("model.ply"), &outcome.splats)?;
-    let path = folder.path("block.json");
-    let text = serde_json::to_string_pretty(&outcome.record)
+    commit_model(folder, &outcome.splats, "block.json", &outcome.record)
+}
+
+/// Writes `model.ply` and then the record `record_file` into a begun run folder and puts it in
+/// place (a record always describes the model beside it).
+pub(crate) fn commit_model(
+    folder: RunFolder,
+    splats: &Splats,
+    record_file: &str,
+    record: &impl Serialize,
+) -> Result<(), SceneError> {
+    crate::splats::ply::write_splats(&folder.path("model.ply"), splats)?;
+    let path = folder.path(record_file);
+    let text = serde_json::to_string_pretty(record)
         .map_err(|e| SceneError::invalid(&path, e.to_string()))?;
     crate::scene::atomic::write_atomic(&path, |w| std::io::Write::write_all(w, text.as_bytes()))?;
     folder.commit()

@@ -9,6 +9,7 @@
 //! (docs/CLUSTER.md).
 
 pub mod block_run;
+pub mod context_run;
 pub mod engines;
 pub mod merge;
 pub mod partition;

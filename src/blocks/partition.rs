@@ -6,7 +6,9 @@
 
 use glam::{Mat3, Vec3};
 
-use crate::blocks::plan::{Block, BlockTraining, Frame, PLAN_FORMAT, PLAN_VERSION, Plan};
+use crate::blocks::plan::{
+    Block, BlockTraining, ContextTraining, Frame, PLAN_FORMAT, PLAN_VERSION, Plan,
+};
 use crate::scene::Dataset;
 use crate::train::views::{Holdout, split_views};
 
@@ -52,6 +54,8 @@ pub struct PartitionConfig {
     pub min_share: f32,
     pub min_photos: usize,
     pub training: BlockTraining,
+    /// The context run every block renders frozen behind its own (None: none).
+    pub context: Option<ContextTraining>,
 }
 
 /// The plan of `dataset` (opened from `dataset_path`, absolute) under `config`.
@@ -133,6 +137,7 @@ pub fn partition(
         cross_range: range(1),
         up_range: range(2),
         training: config.training.clone(),
+        context: config.context.clone(),
         blocks: cuts
             .windows(2)
             .enumerate()
@@ -176,6 +181,9 @@ pub fn replan(
                 ..b.clone()
             })
             .collect(),
+        // The update's changed blocks train without a context: the previous survey's context
+        // is of the old photos, and the update trains none of its own (docs/CLUSTER.md).
+        context: None,
         ..previous.clone()
     };
     assign_photos(&mut plan, dataset, &train, &points, min_share);

@@ -95,6 +95,26 @@ impl BlockTraining {
     }
 }
 
+/// The coarse whole-scene context model (CityGaussian's coarse prior): one short whole run at a
+/// low resolution, trained once before the blocks (`train-block --context`). Each block renders
+/// it frozen behind its own Gaussians where it lies outside the block's box, so the sky, the far
+/// ground and the rest of the structure in its photos are explained and only its own Gaussians
+/// learn; the merge keeps the context's Gaussians that lie outside every block's box.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContextTraining {
+    /// Steps of the context run over all training photos.
+    pub iters: u32,
+    /// Its image scale, as the CLI spells it (`"2"`, `"w80"`).
+    pub scale: String,
+}
+
+impl ContextTraining {
+    pub fn image_scale(&self) -> Option<ImageScale> {
+        ImageScale::parse(&self.scale)
+    }
+}
+
 /// A partition plan (see the module doc).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -115,6 +135,10 @@ pub struct Plan {
     pub up_range: [f32; 2],
     pub training: BlockTraining,
     pub blocks: Vec<Block>,
+    /// The context every block renders frozen (None: none; plans written before it have none,
+    /// and their digest is unchanged: the field is not written when None).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub context: Option<ContextTraining>,
 }
 
 impl Plan {
@@ -137,6 +161,33 @@ impl Plan {
         let last = self.blocks.len() - 1;
         let b = &self.blocks[k];
         (k == 0 || along >= b.start - self.margin) && (k == last || along < b.end + self.margin)
+    }
+
+    /// Whether a point at frame coordinates `local` lies within the structure's across and up
+    /// extents (`cross_range`, `up_range`).
+    pub fn in_structure(&self, local: Vec3) -> bool {
+        let within = |v: f32, [lo, hi]: [f32; 2]| v >= lo && v <= hi;
+        within(local.y, self.cross_range) && within(local.z, self.up_range)
+    }
+
+    /// Whether a Gaussian at frame coordinates `local` is block `k`'s to train: in its enlarged
+    /// box along the axis and, with a context, within the structure across and up (the sky and
+    /// the far ground are the context's).
+    pub fn trains_point(&self, k: usize, local: Vec3) -> bool {
+        self.trains_on(k, local.x) && (self.context.is_none() || self.in_structure(local))
+    }
+
+    /// Whether the merge keeps block `k`'s Gaussian at frame coordinates `local`: in its own box
+    /// along the axis and, with a context, within the structure across and up.
+    pub fn keeps_point(&self, k: usize, local: Vec3) -> bool {
+        self.keeps(k, local.x) && (self.context.is_none() || self.in_structure(local))
+    }
+
+    /// Whether a context Gaussian at `local` lies outside every block's own box: what the merge
+    /// keeps of the context. The blocks tile the axis, so that is outside the structure across
+    /// or up.
+    pub fn outside_every_block(&self, local: Vec3) -> bool {
+        !self.in_structure(local)
     }
 
     /// Every check `load` makes, naming `path` and the field that fails.
@@ -213,6 +264,17 @@ impl Plan {
         }
         if t.test_every == 0 || !t.background.iter().all(|c| c.is_finite()) {
             return bad("training.test_every is 0 or training.background not finite".into());
+        }
+        if let Some(context) = &self.context {
+            if context.image_scale().is_none() {
+                return bad(format!(
+                    "context.scale {:?} is not an image scale",
+                    context.scale
+                ));
+            }
+            if context.iters == 0 {
+                return bad("context.iters is 0: a context trains at least one step".into());
+            }
         }
         if self.blocks.is_empty() || self.blocks.len() > MAX_BLOCKS {
             return bad(format!(

@@ -10,6 +10,7 @@ use std::process::{Child, Command};
 use anyhow::Context;
 
 use damage_twin::blocks::block_run::finished;
+use damage_twin::blocks::context_run::context_finished;
 use damage_twin::blocks::engines::JobCommand;
 use damage_twin::blocks::engines::k8s::{K8sSettings, write_k8s};
 use damage_twin::blocks::engines::slurm::{SlurmResources, slurm_scripts, write_slurm};
@@ -140,6 +141,7 @@ fn job_command(
         plan_dir: dir.clone(),
         threads: common.threads,
         finish,
+        context: plan.context.is_some(),
     };
     Ok((plan, dir, command, model))
 }
@@ -252,6 +254,20 @@ pub(crate) fn train_locally(
         (cores / workers).max(1)
     });
     let binary = std::env::current_exe().context("finding this binary's path")?;
+    // The context first, on every worker's cores: each block renders it.
+    if plan.context.is_some() && context_finished(dir, plan).is_none() {
+        println!("training the context on {} threads", workers * threads);
+        let status = Command::new(&binary)
+            .arg("train-block")
+            .arg(dir)
+            .args(["--context", "--quiet"])
+            .args(["--threads", &(workers * threads).to_string()])
+            .status()
+            .context("starting the context")?;
+        if !status.success() {
+            anyhow::bail!("the context failed ({status}); rerun to retrain it");
+        }
+    }
     let mut queue: VecDeque<usize> = (0..plan.blocks.len())
         .filter(|&k| plan.blocks[k].skipped.is_none() && finished(dir, plan, k).is_none())
         .collect();

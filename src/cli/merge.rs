@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use serde::Serialize;
 
-use damage_twin::blocks::merge::{MergedBlock, merge_blocks};
+use damage_twin::blocks::merge::{MergedBlock, MergedContext, merge_blocks};
 use damage_twin::blocks::seam::{SeamReport, seam_report};
 use damage_twin::blocks::{load_plan, plan_folder};
 use damage_twin::scene::atomic::write_atomic;
@@ -33,6 +33,8 @@ pub struct Args {
 struct MergeReport {
     gaussians: usize,
     blocks: Vec<MergedBlock>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    context: Option<MergedContext>,
     seam: Option<SeamReport>,
 }
 
@@ -42,7 +44,11 @@ pub fn merge(plan_path: &Path, out: &Path, report: bool) -> anyhow::Result<Strin
     let dir = plan_folder(plan_path);
     let outputs = RunFolder::begin(out, &["model.ply", "merge.json"])
         .with_context(|| format!("preparing output folder {}", out.display()))?;
-    let (merged, blocks) = merge_blocks(&dir, &plan)?;
+    let damage_twin::blocks::merge::Merged {
+        splats: merged,
+        blocks,
+        context,
+    } = merge_blocks(&dir, &plan)?;
     let seam = if report {
         let dataset = open_dataset(
             &plan.dataset,
@@ -55,6 +61,7 @@ pub fn merge(plan_path: &Path, out: &Path, report: bool) -> anyhow::Result<Strin
     let report = MergeReport {
         gaussians: merged.len(),
         blocks,
+        context,
         seam,
     };
     damage_twin::splats::ply::write_splats(&outputs.path("model.ply"), &merged)

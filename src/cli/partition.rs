@@ -8,7 +8,7 @@ use anyhow::Context;
 
 use damage_twin::blocks::partition::{PartitionConfig, Split, partition};
 use damage_twin::blocks::picture::save_plan_picture;
-use damage_twin::blocks::plan::BlockTraining;
+use damage_twin::blocks::plan::{BlockTraining, ContextTraining};
 use damage_twin::blocks::write_plan_folder;
 use damage_twin::damage::TrainMode;
 
@@ -55,6 +55,14 @@ pub struct Args {
     /// Every n-th view is held out (the merge's seam report scores on them).
     #[arg(long, default_value_t = 8)]
     pub test_every: usize,
+    /// Steps of a coarse whole-scene context run trained before the blocks (`train-block
+    /// --context`), rendered frozen behind each block and kept by the merge outside every
+    /// block's box (the sky, the far ground); 0: no context.
+    #[arg(long, default_value_t = 0)]
+    pub context_iters: u32,
+    /// The context run's image scale (1, 2, 4, 8, … or w<width>).
+    #[arg(long, default_value = "2")]
+    pub context_scale: String,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -69,6 +77,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let (train, _) =
         damage_twin::train::views::split_views(&dataset, &holdout).map_err(anyhow::Error::msg)?;
+    let context = (args.context_iters > 0).then(|| ContextTraining {
+        iters: args.context_iters,
+        scale: args.context_scale.clone(),
+    });
+    if context.as_ref().is_some_and(|c| c.image_scale().is_none()) {
+        anyhow::bail!(
+            "--context-scale {:?} is not an image scale (1, 2, 4, 8, 0.5, … or w<width>)",
+            args.context_scale
+        );
+    }
     let config = PartitionConfig {
         blocks: args.blocks,
         split: args.split,
@@ -85,6 +103,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             background: args.images.background.to_array(),
             test_every: args.test_every,
         },
+        context,
     };
     let plan = partition(&dataset, &dataset_path, &config)
         .map_err(|e| anyhow::anyhow!("{}: {e}", dataset_path.display()))?;
@@ -104,6 +123,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!(
             "block {}: [{:.2}, {:.2}) m along the long axis, {state}",
             block.index, block.start, block.end
+        );
+    }
+    if let Some(context) = &plan.context {
+        println!(
+            "context: {} steps over all training photos at scale {} (train-block --context, before the blocks)",
+            context.iters, context.scale
         );
     }
     println!(

@@ -35,6 +35,11 @@ pub fn cluster_local_two_workers(plan: &Path, merged: &Path) {
 
 /// A tiny demo building (96×54, 16 views) and a 2-block plan of it in `root/plan`.
 pub fn tiny_plan(root: &Path, plan: &str) -> PathBuf {
+    tiny_plan_with(root, plan, &[])
+}
+
+/// `tiny_plan` with more `partition` flags (`extra`).
+pub fn tiny_plan_with(root: &Path, plan: &str, extra: &[&str]) -> PathBuf {
     let synth = root.join("synth");
     if !synth.exists() {
         let params = damage_twin::synth::SynthParams {
@@ -54,7 +59,8 @@ pub fn tiny_plan(root: &Path, plan: &str) -> PathBuf {
         .arg(synth.join("survey-1"))
         .arg("--out")
         .arg(&out)
-        .args(["--blocks", "2", "--iters", "80", "--seed", "5"]);
+        .args(["--blocks", "2", "--iters", "80", "--seed", "5"])
+        .args(extra);
     run(partition);
     out
 }

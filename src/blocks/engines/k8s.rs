@@ -1,8 +1,10 @@
 //! Kubernetes: an Indexed Job (`completionMode: Indexed`, one completion per block; each pod
 //! gets `JOB_COMPLETION_INDEX`, which `train-block` reads) and a one-pod merge Job, both
 //! mounting one shared volume (a PersistentVolumeClaim, ReadWriteMany) at the same path, under
-//! which the plan folder and the dataset lie. Written as JSON, which `kubectl apply -f` reads
-//! like YAML; `apply.sh` applies the blocks, waits for them to complete, then applies the merge.
+//! which the plan folder and the dataset lie; with a context, a one-pod context Job before the
+//! blocks. Written as JSON, which `kubectl apply -f` reads like YAML; `apply.sh` applies the
+//! context and waits for it to complete (`kubectl wait --for=condition=complete`), then the
+//! blocks, waits for them, then applies the merge.
 
 use std::path::{Path, PathBuf};
 
@@ -75,12 +77,22 @@ pub fn blocks_job(command: &JobCommand, blocks: usize, settings: &K8sSettings) -
 
 /// The merge Job, writing the merged model to `merged_out`.
 pub fn merge_job(command: &JobCommand, settings: &K8sSettings, merged_out: &Path) -> Value {
+    one_pod_job(settings, "merge", command.merge(merged_out))
+}
+
+/// The context Job (`train-block PLAN --context`), run before the blocks.
+pub fn context_job(command: &JobCommand, settings: &K8sSettings) -> Value {
+    one_pod_job(settings, "context", command.train_context())
+}
+
+/// A Job of one pod named `{name}-{part}` running `run`.
+fn one_pod_job(settings: &K8sSettings, part: &str, run: Vec<String>) -> Value {
     json!({
         "apiVersion": "batch/v1",
         "kind": "Job",
         "metadata": {
-            "name": format!("{}-merge", settings.name),
-            "labels": { "app.kubernetes.io/name": "damage-twin", "damage-twin/part": "merge" },
+            "name": format!("{}-{part}", settings.name),
+            "labels": { "app.kubernetes.io/name": "damage-twin", "damage-twin/part": part },
         },
         "spec": {
             "completions": 1,
@@ -88,7 +100,7 @@ pub fn merge_job(command: &JobCommand, settings: &K8sSettings, merged_out: &Path
             "backoffLimit": 2,
             "template": {
                 "metadata": { "labels": { "app.kubernetes.io/name": "damage-twin" } },
-                "spec": pod_spec(settings, "merge", command.merge(merged_out)),
+                "spec": pod_spec(settings, part, run),
             },
         },
     })
@@ -97,6 +109,8 @@ pub fn merge_job(command: &JobCommand, settings: &K8sSettings, merged_out: &Path
 /// Where `write_k8s` put the files.
 #[derive(Clone, Debug)]
 pub struct K8sPaths {
+    /// The context Job (None: the plan has no context).
+    pub context: Option<PathBuf>,
     pub blocks: PathBuf,
     pub merge: PathBuf,
     pub apply: PathBuf,
@@ -112,21 +126,34 @@ pub fn write_k8s(
 ) -> Result<K8sPaths, SceneError> {
     std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
     let paths = K8sPaths {
+        context: command.context.then(|| dir.join("context-job.json")),
         blocks: dir.join("blocks-job.json"),
         merge: dir.join("merge-job.json"),
         apply: dir.join("apply.sh"),
     };
     let pretty = |v: &Value| serde_json::to_string_pretty(v).unwrap_or_default() + "\n";
-    let apply = format!(
+    let wait = |part: &str| {
+        format!(
+            "kubectl wait --for=condition=complete --timeout=-1s job/{}\n",
+            shell_line(&[format!("{}-{part}", settings.name)])
+        )
+    };
+    let mut apply = String::from(
         "#!/bin/bash\n\
-         # Applies the block Job, waits for every block, then applies the merge Job.\n\
+         # Applies the context Job (when the plan has one) and waits for it, then the block Job,\n\
+         # waits for every block, then applies the merge Job.\n\
          set -euo pipefail\n\
-         here=\"$(cd \"$(dirname \"$0\")\" && pwd)\"\n\
-         kubectl apply -f \"$here/blocks-job.json\"\n\
-         kubectl wait --for=condition=complete --timeout=-1s job/{}\n\
-         kubectl apply -f \"$here/merge-job.json\"\n",
-        shell_line(&[format!("{}-blocks", settings.name)])
+         here=\"$(cd \"$(dirname \"$0\")\" && pwd)\"\n",
     );
+    if let Some(path) = &paths.context {
+        let text = pretty(&context_job(command, settings));
+        write_atomic(path, |w| std::io::Write::write_all(w, text.as_bytes()))?;
+        apply.push_str("kubectl apply -f \"$here/context-job.json\"\n");
+        apply.push_str(&wait("context"));
+    }
+    apply.push_str("kubectl apply -f \"$here/blocks-job.json\"\n");
+    apply.push_str(&wait("blocks"));
+    apply.push_str("kubectl apply -f \"$here/merge-job.json\"\n");
     for (path, text) in [
         (
             &paths.blocks,

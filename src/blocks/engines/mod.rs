@@ -18,6 +18,8 @@ pub struct JobCommand {
     /// What the last job runs instead of `merge PLAN --out MODEL` (None: the merge); `twin
     /// update` on a partitioned twin merges and records into the twin this way.
     pub finish: Option<Vec<String>>,
+    /// Whether the plan has a context (`Plan::context`): its job runs first, the blocks after it.
+    pub context: bool,
 }
 
 impl JobCommand {
@@ -32,6 +34,13 @@ impl JobCommand {
         if let Some(t) = self.threads {
             args.extend(["--threads".into(), t.to_string()]);
         }
+        args
+    }
+
+    /// The context job's command line (`train-block PLAN --context`).
+    pub fn train_context(&self) -> Vec<String> {
+        let mut args = self.train_block();
+        args.insert(3, "--context".into());
         args
     }
 

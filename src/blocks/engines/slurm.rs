@@ -1,6 +1,7 @@
 //! Slurm: an `sbatch` array script with one task per block (`train-block` reads
 //! `SLURM_ARRAY_TASK_ID`), a merge script, and `submit.sh`, which submits the array and the
-//! merge with `--dependency=afterok` on it. The plan folder, the dataset and the binary must be
+//! merge with `--dependency=afterok` on it; with a context, a context script that `submit.sh`
+//! submits first, the array depending on it (`afterok`). The plan folder, the dataset and the binary must be
 //! at the same path on every node (a shared file system).
 
 use std::path::{Path, PathBuf};
@@ -24,6 +25,8 @@ pub struct SlurmResources {
 /// The three files' text.
 #[derive(Clone, Debug)]
 pub struct SlurmScripts {
+    /// The context job (None: the plan has no context).
+    pub context: Option<String>,
     pub blocks: String,
     pub merge: String,
     pub submit: String,
@@ -32,6 +35,7 @@ pub struct SlurmScripts {
 /// Where `write_slurm` put them.
 #[derive(Clone, Debug)]
 pub struct SlurmPaths {
+    pub context: Option<PathBuf>,
     pub blocks: PathBuf,
     pub merge: PathBuf,
     pub submit: PathBuf,
@@ -78,16 +82,39 @@ pub fn slurm_scripts(
         "exec {}\n",
         shell_line(&command.merge(merged_out))
     ));
-    let submit = "#!/bin/bash\n\
-         # Submits the block array, then the merge to start when every block succeeded.\n\
+    let context = command.context.then(|| {
+        let mut context = header(
+            res,
+            &format!("{}-context", res.job_name),
+            &logs.join("context.out"),
+        );
+        context.push_str("set -euo pipefail\n");
+        context.push_str(&format!("exec {}\n", shell_line(&command.train_context())));
+        context
+    });
+    let mut submit = String::from(
+        "#!/bin/bash\n\
+         # Submits the block array (after the context, when the plan has one), then the merge to\n\
+         # start when every block succeeded.\n\
          set -euo pipefail\n\
-         here=\"$(cd \"$(dirname \"$0\")\" && pwd)\"\n\
-         blocks=\"$(sbatch --parsable \"$here/blocks.sbatch\")\"\n\
-         blocks=\"${blocks%%;*}\"\n\
+         here=\"$(cd \"$(dirname \"$0\")\" && pwd)\"\n",
+    );
+    if context.is_some() {
+        submit.push_str(
+            "context=\"$(sbatch --parsable \"$here/context.sbatch\")\"\n\
+             context=\"${context%%;*}\"\n\
+             blocks=\"$(sbatch --parsable --dependency=afterok:\"$context\" \"$here/blocks.sbatch\")\"\n",
+        );
+    } else {
+        submit.push_str("blocks=\"$(sbatch --parsable \"$here/blocks.sbatch\")\"\n");
+    }
+    submit.push_str(
+        "blocks=\"${blocks%%;*}\"\n\
          merge=\"$(sbatch --parsable --dependency=afterok:\"$blocks\" \"$here/merge.sbatch\")\"\n\
-         echo \"blocks job $blocks, merge job ${merge%%;*}\"\n"
-        .to_string();
+         echo \"blocks job $blocks, merge job ${merge%%;*}\"\n",
+    );
     SlurmScripts {
+        context,
         blocks: block,
         merge,
         submit,
@@ -103,6 +130,7 @@ pub fn write_slurm(
     std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
     std::fs::create_dir_all(logs).map_err(|e| SceneError::io(logs, e))?;
     let paths = SlurmPaths {
+        context: scripts.context.as_ref().map(|_| dir.join("context.sbatch")),
         blocks: dir.join("blocks.sbatch"),
         merge: dir.join("merge.sbatch"),
         submit: dir.join("submit.sh"),
@@ -112,6 +140,10 @@ pub fn write_slurm(
         (&paths.merge, &scripts.merge),
         (&paths.submit, &scripts.submit),
     ] {
+        write_atomic(path, |w| std::io::Write::write_all(w, text.as_bytes()))?;
+        make_executable(path)?;
+    }
+    if let (Some(path), Some(text)) = (&paths.context, &scripts.context) {
         write_atomic(path, |w| std::io::Write::write_all(w, text.as_bytes()))?;
         make_executable(path)?;
     }
