@@ -5,7 +5,6 @@
 //! trainer of its own: the cost of a step follows the hulls' pixels, not the image's.
 
 use std::sync::Arc;
-use std::time::Instant;
 
 use serde::Serialize;
 
@@ -17,6 +16,7 @@ use crate::damage::refine_quality::{hull_coverage, quality, step_costs};
 use crate::damage::refine_selection::{given_selection, region_labels, select_by_masks};
 use crate::damage::select::Selection;
 use crate::damage::setup::apply_mode;
+use crate::metrics::PhaseClock;
 use crate::scene::Dataset;
 use crate::splats::Splats;
 use crate::splats::model::state;
@@ -27,7 +27,7 @@ use crate::train::run::{TrainSetup, run_training};
 use crate::train::spec::TrainSpec;
 use crate::train::views::split_views;
 
-/// Seconds per phase.
+/// Seconds per phase (wall or CPU).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct PhaseSeconds {
     pub select: f64,
@@ -59,7 +59,12 @@ pub struct RefineReport {
     /// Per class, the share of the held-out views' reference damage pixels inside their hulls
     /// (None without reference masks): what the refinement can reach at most.
     pub hull_coverage: Option<std::collections::BTreeMap<String, f64>>,
+    /// Wall seconds per phase.
     pub seconds: PhaseSeconds,
+    /// CPU seconds (user + system, every thread of the process) per phase: the cost on a
+    /// shared host, where wall time follows the other processes' load. None where the process's
+    /// CPU time cannot be read.
+    pub cpu_seconds: Option<PhaseSeconds>,
     pub selection_seconds: crate::damage::select::SelectTimes,
     pub gaussians_before: usize,
     pub gaussians_after: usize,
@@ -124,8 +129,10 @@ pub fn refine_from(
     model: &Splats,
     config: &RefineConfig,
 ) -> Result<RefineOutcome, JobError> {
-    let started = Instant::now();
+    let started = PhaseClock::start();
     let mut seconds = PhaseSeconds::default();
+    // Stays Some while every phase's CPU time could be read.
+    let mut cpu = Some(PhaseSeconds::default());
     let mode = config.select.mode;
     let (train_idx, heldout_idx) =
         split_views(dataset, &config.holdout).map_err(JobError::Invalid)?;
@@ -138,13 +145,14 @@ pub fn refine_from(
 
     // 1. Select, against the training views' own masks at the selection scale (or take the
     // person's selection as it is).
-    let t = Instant::now();
+    let t = PhaseClock::start();
     let selection = match &config.given {
         Some(given) => given_selection(model, given),
         None => select_by_masks(ctx, dataset, model, config, &train_idx, masks.as_ref())?,
     };
     let n = model.len();
-    seconds.select = t.elapsed().as_secs_f64();
+    seconds.select = t.wall_seconds();
+    record_cpu(&mut cpu, &t, |c| &mut c.select);
     ctx.log(format!(
         "selection: {} filtered, {} validated, {} with neighbours",
         selection.filtered.len(),
@@ -158,7 +166,7 @@ pub fn refine_from(
     }
 
     // 2. Hulls in every view at the refinement scale.
-    let t = Instant::now();
+    let t = PhaseClock::start();
     let region_of = region_labels(model, &selection, config);
     let region_count = region_of
         .iter()
@@ -195,10 +203,11 @@ pub fn refine_from(
             config.hulls.dilate_px,
         )?;
     }
-    seconds.hulls = t.elapsed().as_secs_f64();
+    seconds.hulls = t.wall_seconds();
+    record_cpu(&mut cpu, &t, |c| &mut c.hulls);
 
     // 3. The crops of the training views' hulls, at the refinement scale.
-    let t = Instant::now();
+    let t = PhaseClock::start();
     let trained: Vec<&ViewHulls> = views
         .iter()
         .filter(|v| !v.heldout && !v.hulls.is_empty())
@@ -223,10 +232,11 @@ pub fn refine_from(
         trained.len(),
         100.0 * hull_fraction
     ));
-    seconds.load = t.elapsed().as_secs_f64();
+    seconds.load = t.wall_seconds();
+    record_cpu(&mut cpu, &t, |c| &mut c.load);
 
     // 4. Train the selection.
-    let t = Instant::now();
+    let t = PhaseClock::start();
     let mut spec = refine_spec(config, model, &selection.selected, labels);
     if let Some(rate) = config.neighbour_geometry_rate {
         let mut rates = vec![rate; n];
@@ -258,12 +268,13 @@ pub fn refine_from(
         heldout: Vec::new(),
     };
     let outcome = run_training(ctx, setup, "refine")?;
-    seconds.refine = t.elapsed().as_secs_f64();
+    seconds.refine = t.wall_seconds();
+    record_cpu(&mut cpu, &t, |c| &mut c.refine);
     let mut refined = (*outcome.splats).clone();
     mark_refined(&mut refined, model, &selection);
 
     // 5. Score before and after on the held-out views.
-    let t = Instant::now();
+    let t = PhaseClock::start();
     let readout = DamageReadout {
         mode,
         ..DamageReadout::for_model(baseline, config.select.palette)
@@ -272,8 +283,10 @@ pub fn refine_from(
     let before = quality(&focus, baseline, &heldout, config.background, &readout)?;
     let after = quality(&focus, &refined, &heldout, config.background, &readout)?;
     let hull_coverage = hull_coverage(&focus, &heldout)?;
-    seconds.evaluate = t.elapsed().as_secs_f64();
-    seconds.total = started.elapsed().as_secs_f64();
+    seconds.evaluate = t.wall_seconds();
+    record_cpu(&mut cpu, &t, |c| &mut c.evaluate);
+    seconds.total = started.wall_seconds();
+    record_cpu(&mut cpu, &started, |c| &mut c.total);
 
     let (width, height) = (views[0].width, views[0].height);
     let report = RefineReport {
@@ -292,6 +305,7 @@ pub fn refine_from(
         hull_fraction,
         hull_coverage,
         seconds,
+        cpu_seconds: cpu,
         selection_seconds: selection.seconds,
         gaussians_before: baseline.len(),
         gaussians_after: refined.len(),
@@ -310,6 +324,19 @@ pub fn refine_from(
         report,
         cancelled: outcome.cancelled,
     })
+}
+
+/// Writes `clock`'s CPU seconds into the phase `field` of `cpu`, or gives up on CPU times
+/// (None) when they cannot be read.
+fn record_cpu(
+    cpu: &mut Option<PhaseSeconds>,
+    clock: &PhaseClock,
+    field: fn(&mut PhaseSeconds) -> &mut f64,
+) {
+    *cpu = cpu.take().and_then(|mut phases| {
+        *field(&mut phases) = clock.cpu_seconds()?;
+        Some(phases)
+    });
 }
 
 /// The refinement's training spec: the focused run on the selection `trainable`, with the

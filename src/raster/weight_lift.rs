@@ -8,7 +8,11 @@
 //! `Σ_p w_p α_ip T_ip` in `ScreenGrads::v_labels` for every Gaussian, with the same culling,
 //! tile order and early stop as the render.
 
-use crate::raster::{PixelGrads, Rasterizer, RenderOutput, RenderSettings};
+use crate::raster::project::project;
+use crate::raster::{
+    CameraFrame, PixelGrads, Projected, Rasterizer, RenderOutput, RenderSettings, tile_grid,
+    tile_rect,
+};
 use crate::scene::Camera;
 use crate::splats::Splats;
 
@@ -23,6 +27,10 @@ pub struct WeightLift {
     v_labels: Vec<f32>,
     grads: crate::raster::SplatGrads,
     settings: RenderSettings,
+    /// `view_of`'s projection, made before the render to choose its tiles.
+    scout: Projected,
+    /// `view_of`'s tiles (`ty * tiles_x + tx`).
+    tiles: Vec<bool>,
 }
 
 impl WeightLift {
@@ -40,6 +48,8 @@ impl WeightLift {
             v_labels: Vec::new(),
             grads: crate::raster::SplatGrads::default(),
             settings,
+            scout: Projected::default(),
+            tiles: Vec::new(),
         }
     }
 
@@ -71,6 +81,44 @@ impl WeightLift {
             &v_out,
             &mut self.grads,
         );
+        &self.rasterizer.screen_grads().v_labels
+    }
+
+    /// [`WeightLift::view`] whose weights are only needed for the Gaussians `gaussians`: renders
+    /// only the tiles they are binned into. Their weights are bit-identical to `view`'s (each
+    /// tile blends its own depth-sorted list, and a Gaussian's weight sums its own tiles'
+    /// intersections in tile order, so tiles it is not in change nothing of it); every other
+    /// Gaussian's is that of the rendered tiles only. The hull drawing of a refinement needs
+    /// the visibility of its few thousand selected Gaussians, not of the whole model.
+    pub fn view_of(
+        &mut self,
+        camera: &Camera,
+        gaussians: &[u32],
+        weight: impl Fn(usize, usize) -> f32,
+    ) -> &[f32] {
+        let frame = CameraFrame::new(camera);
+        project(&self.probe, &frame, &self.settings, &mut self.scout);
+        let (width, height) = (frame.width, frame.height);
+        let (tiles_x, tiles_y) = tile_grid(width, height);
+        self.tiles.clear();
+        self.tiles.resize((tiles_x * tiles_y) as usize, false);
+        for &g in gaussians {
+            let g = g as usize;
+            let [x0, y0, x1, y1] = tile_rect(
+                self.scout.means2d[g],
+                self.scout.radii[g],
+                self.scout.extents[g],
+                width,
+                height,
+            );
+            for ty in y0..y1 {
+                let row = (ty * tiles_x) as usize;
+                self.tiles[row + x0 as usize..row + x1 as usize].fill(true);
+            }
+        }
+        self.rasterizer.set_active_tiles(Some(&self.tiles));
+        self.view(camera, weight);
+        self.rasterizer.set_active_tiles(None);
         &self.rasterizer.screen_grads().v_labels
     }
 
@@ -170,5 +218,80 @@ mod tests {
         for g in 0..splats.len() {
             assert!(weights[g * 2 + 1] <= weights[g * 2] + 1e-4 * scale);
         }
+    }
+
+    /// 400 small Gaussians scattered over a 160×128 image (10 × 8 tiles), some behind others.
+    fn wide_scene() -> (Splats, Camera) {
+        let mut splats = Splats::empty(0, 0);
+        let mut rng = fastrand::Rng::with_seed(11);
+        for id in 0..400 {
+            let mean = Vec3::new(
+                rng.f32() * 4.0 - 2.0,
+                rng.f32() * 3.2 - 1.6,
+                rng.f32() * 2.0,
+            );
+            splats.push(
+                mean,
+                Vec3::splat((0.02 + 0.06 * rng.f32()).ln()),
+                Quat::IDENTITY,
+                rng.f32() * 4.0 - 1.0,
+                &[rng.f32(), rng.f32(), rng.f32()],
+                &[],
+                id,
+                0,
+            );
+        }
+        let k = Intrinsics {
+            width: 160,
+            height: 128,
+            fx: 140.0,
+            fy: 140.0,
+            cx: 80.0,
+            cy: 64.0,
+        };
+        (
+            splats,
+            Camera::new(k, Quat::IDENTITY, Vec3::new(0.0, 0.0, 4.0)),
+        )
+    }
+
+    #[test]
+    fn weights_of_a_subset_are_those_of_the_whole_render_bit_for_bit() {
+        let (splats, camera) = wide_scene();
+        let settings = RenderSettings::default();
+        // A weight that differs per pixel, so that a pixel's share cannot hide.
+        let weight = |p: usize, _: usize| 0.25 + (p % 7) as f32 * 0.125;
+        let whole = WeightLift::new(&splats, 1, settings)
+            .view(&camera, weight)
+            .to_vec();
+        // The left third of the scene, and a few scattered others.
+        let subset: Vec<u32> = (0..splats.len() as u32)
+            .filter(|&g| splats.means[g as usize].x < -0.7 || g % 37 == 0)
+            .collect();
+        let mut lift = WeightLift::new(&splats, 1, settings);
+        let of_subset = lift.view_of(&camera, &subset, weight).to_vec();
+        let skipped = lift.tiles.iter().filter(|&&t| !t).count();
+        assert!(skipped > 10, "only {skipped} of 80 tiles skipped");
+        let mut seen = 0;
+        for &g in &subset {
+            let g = g as usize;
+            assert_eq!(
+                of_subset[g].to_bits(),
+                whole[g].to_bits(),
+                "Gaussian {g}: {} against the whole render's {}",
+                of_subset[g],
+                whole[g]
+            );
+            seen += usize::from(whole[g] > 0.1);
+        }
+        assert!(seen > 20, "only {seen} of the subset draw anything");
+        // The lift is reusable: a whole view after it is the whole render again.
+        let again = lift.view(&camera, weight).to_vec();
+        assert!(
+            again
+                .iter()
+                .zip(&whole)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        );
     }
 }

@@ -1,5 +1,5 @@
 //! Speed against accuracy (DESIGN.md "Measuring"): per method (or a project's step) one mark of
-//! held-out IoU (per class) and PSNR against wall time, as PNG and SVG files or an SVG string.
+//! held-out IoU (per class) and PSNR against wall (or CPU) time, as PNG and SVG files or an SVG string.
 //! Presentation only: the figures arrive measured (the hierarchy study's rows become points in
 //! `studies::hierarchy::table`).
 
@@ -38,7 +38,35 @@ pub struct TradeoffPoint {
     pub psnr: f64,
 }
 
-fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, rows: &[TradeoffPoint]) -> DrawResult
+/// What a chart's seconds are: wall time, or CPU time (user + system), the cost that stays
+/// honest on a shared host.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TimeAxis {
+    Wall,
+    Cpu,
+}
+
+impl TimeAxis {
+    fn caption(self) -> &'static str {
+        match self {
+            TimeAxis::Wall => "wall time",
+            TimeAxis::Cpu => "CPU time",
+        }
+    }
+
+    fn unit(self) -> &'static str {
+        match self {
+            TimeAxis::Wall => "seconds",
+            TimeAxis::Cpu => "CPU seconds (user + system)",
+        }
+    }
+}
+
+fn draw<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    rows: &[TradeoffPoint],
+    axis: TimeAxis,
+) -> DrawResult
 where
     DB::ErrorType: 'static,
 {
@@ -75,14 +103,17 @@ where
         _ => (0.0, 1.0),
     };
     let mut chart = ChartBuilder::on(&left)
-        .caption("held-out IoU against wall time", ("sans-serif", 18))
+        .caption(
+            format!("held-out IoU against {}", axis.caption()),
+            ("sans-serif", 18),
+        )
         .margin(10)
         .x_label_area_size(36)
         .y_label_area_size(48)
         .build_cartesian_2d(x.0..x.1, y0..y1)?;
     chart
         .configure_mesh()
-        .x_desc("seconds")
+        .x_desc(axis.unit())
         .y_desc("IoU")
         .draw()?;
     for class in &classes {
@@ -117,14 +148,17 @@ where
     // PSNR against seconds.
     let (p0, p1) = span(rows.iter().map(|r| r.psnr), 0.15);
     let mut chart = ChartBuilder::on(&right)
-        .caption("held-out PSNR against wall time", ("sans-serif", 18))
+        .caption(
+            format!("held-out PSNR against {}", axis.caption()),
+            ("sans-serif", 18),
+        )
         .margin(10)
         .x_label_area_size(36)
         .y_label_area_size(48)
         .build_cartesian_2d(x.0..x.1, p0..p1)?;
     chart
         .configure_mesh()
-        .x_desc("seconds")
+        .x_desc(axis.unit())
         .y_desc("PSNR (dB)")
         .draw()?;
     let blue = RGBColor(40, 90, 200);
@@ -141,22 +175,34 @@ where
     Ok(())
 }
 
-/// Writes `<stem>.png` and `<stem>.svg` into `dir`.
+/// Writes `<stem>.png` and `<stem>.svg` into `dir`, against wall time.
 pub fn write_tradeoff_chart(
     dir: &Path,
     stem: &str,
     points: &[TradeoffPoint],
+) -> Result<Vec<PathBuf>, ChartError> {
+    write_tradeoff_chart_on(dir, stem, points, TimeAxis::Wall)
+}
+
+/// [`write_tradeoff_chart`] with the points' seconds being those `axis` says.
+pub fn write_tradeoff_chart_on(
+    dir: &Path,
+    stem: &str,
+    points: &[TradeoffPoint],
+    axis: TimeAxis,
 ) -> Result<Vec<PathBuf>, ChartError> {
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
     draw(
         BitMapBackend::new(&png, (1200, 500)).into_drawing_area(),
         points,
+        axis,
     )
     .map_err(|e| ChartError::new(&png, e))?;
     draw(
         SVGBackend::new(&svg, (1200, 500)).into_drawing_area(),
         points,
+        axis,
     )
     .map_err(|e| ChartError::new(&svg, e))?;
     Ok(vec![png, svg])
@@ -168,6 +214,7 @@ pub fn tradeoff_svg(name: &Path, points: &[TradeoffPoint]) -> Result<String, Cha
     draw(
         SVGBackend::with_string(&mut svg, (1200, 500)).into_drawing_area(),
         points,
+        TimeAxis::Wall,
     )
     .map_err(|e| ChartError::new(name, e))?;
     Ok(svg)

@@ -10,10 +10,20 @@ use crate::studies::hierarchy::config::Method;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HierarchyRow {
     pub method: Method,
-    /// Wall time of everything the method needs (a refinement includes its coarse twin).
+    /// Wall time of everything the method needs to make its twin (a refinement includes its
+    /// coarse twin): loading, selecting, drawing hulls and training; no held-out scoring (not
+    /// the trainer's final one, nor the refinement's before/after one), for every method alike.
     pub seconds: f64,
     /// Wall time per phase.
     pub phases: BTreeMap<String, f64>,
+    /// The same work's CPU seconds (user + system of the process, every thread): the cost
+    /// that does not grow with other processes' load. None where unreadable (and in studies
+    /// saved before it was recorded).
+    #[serde(default)]
+    pub cpu_seconds: Option<f64>,
+    /// CPU seconds per phase (the phases of `phases`; empty where unreadable).
+    #[serde(default)]
+    pub cpu_phases: BTreeMap<String, f64>,
     /// Held-out IoU per class at high resolution.
     pub iou: BTreeMap<String, f64>,
     /// Held-out PSNR at high resolution.

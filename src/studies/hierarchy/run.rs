@@ -5,12 +5,12 @@
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::time::Instant;
 
 use crate::damage::assess::{EvalRequest, evaluate_model};
 use crate::damage::evaluate::DamageReadout;
 use crate::damage::refine::{RefineConfig, Strategy, refine};
 use crate::damage::setup::{RunConfig, prepare_run};
+use crate::metrics::PhaseClock;
 use crate::scene::Dataset;
 use crate::splats::Splats;
 use crate::studies::hierarchy::config::{HierarchyConfig, Method};
@@ -30,17 +30,51 @@ pub fn hierarchy_job(
     })
 }
 
-/// Trains `run` on `dataset` in this job and returns the model and the seconds it took.
+/// Wall and CPU seconds of one phase (CPU None where unreadable).
+#[derive(Clone, Copy, Debug)]
+struct Cost {
+    wall: f64,
+    cpu: Option<f64>,
+}
+
+impl Cost {
+    fn of(clock: &PhaseClock) -> Cost {
+        Cost {
+            wall: clock.wall_seconds(),
+            cpu: clock.cpu_seconds(),
+        }
+    }
+}
+
+/// A row's `phases` and `cpu_phases` from its named phase costs (`cpu_phases` empty unless
+/// every phase's CPU time was read).
+fn phase_maps(phases: &[(&str, Cost)]) -> (BTreeMap<String, f64>, BTreeMap<String, f64>) {
+    let wall = phases
+        .iter()
+        .map(|(name, c)| (name.to_string(), c.wall))
+        .collect();
+    let cpu = phases
+        .iter()
+        .map(|(name, c)| Some((name.to_string(), c.cpu?)))
+        .collect::<Option<BTreeMap<_, _>>>()
+        .unwrap_or_default();
+    (wall, cpu)
+}
+
+/// Trains `run` on `dataset` in this job and returns the model and what it cost: loading and
+/// training, without the trainer's final held-out scoring (the study scores every method
+/// itself, outside the counted time).
 fn train_twin(
     ctx: &mut JobContext,
     dataset: &Dataset,
     run: &RunConfig,
     phase: &'static str,
-) -> Result<(Splats, f64), JobError> {
-    let started = Instant::now();
-    let prepared = prepare_run(dataset, run)?;
+) -> Result<(Splats, Cost), JobError> {
+    let clock = PhaseClock::start();
+    let mut prepared = prepare_run(dataset, run)?;
+    prepared.setup.heldout.clear();
     let outcome = run_training(ctx, prepared.setup, phase)?;
-    Ok(((*outcome.splats).clone(), started.elapsed().as_secs_f64()))
+    Ok(((*outcome.splats).clone(), Cost::of(&clock)))
 }
 
 /// The whole study in the calling job.
@@ -86,13 +120,16 @@ pub fn run_hierarchy(
             iterations: config.coarse_iterations,
             ..config.run.clone()
         };
-        let (coarse, coarse_s) = train_twin(ctx, dataset, &coarse_run, "coarse")?;
+        let (coarse, coarse_cost) = train_twin(ctx, dataset, &coarse_run, "coarse")?;
         if wants(Method::Coarse) {
             let (iou, psnr) = score(&coarse)?;
+            let (phases, cpu_phases) = phase_maps(&[("coarse", coarse_cost)]);
             rows.push(HierarchyRow {
                 method: Method::Coarse,
-                seconds: coarse_s,
-                phases: BTreeMap::from([("coarse".to_string(), coarse_s)]),
+                seconds: coarse_cost.wall,
+                phases,
+                cpu_seconds: coarse_cost.cpu,
+                cpu_phases,
                 iou,
                 psnr,
                 gaussians: coarse.len(),
@@ -112,23 +149,36 @@ pub fn run_hierarchy(
                 scale: config.fine_scale,
                 ..config.refine.clone()
             };
-            let started = Instant::now();
+            let clock = PhaseClock::start();
             let outcome = refine(ctx, dataset, &coarse, &refine_config)?;
-            let refine_s = started.elapsed().as_secs_f64();
+            let refine_cost = Cost::of(&clock);
             let (iou, psnr) = score(&outcome.splats)?;
-            let s = &outcome.report.seconds;
+            let wall = &outcome.report.seconds;
+            let cpu = outcome.report.cpu_seconds.as_ref();
+            let phase = |pick: fn(&crate::damage::refine::PhaseSeconds) -> f64| Cost {
+                wall: pick(wall),
+                cpu: cpu.map(pick),
+            };
+            let evaluate = phase(|p| p.evaluate);
+            // The refinement's own before/after scoring is left out like the trainers' final
+            // one: every method is counted up to its twin, and scored by the study alone.
+            let counted = Cost {
+                wall: refine_cost.wall - evaluate.wall,
+                cpu: refine_cost.cpu.zip(evaluate.cpu).map(|(r, e)| r - e),
+            };
+            let (phases, cpu_phases) = phase_maps(&[
+                ("coarse", coarse_cost),
+                ("select", phase(|p| p.select)),
+                ("hulls", phase(|p| p.hulls)),
+                ("load", phase(|p| p.load)),
+                ("refine", phase(|p| p.refine)),
+            ]);
             rows.push(HierarchyRow {
                 method,
-                seconds: coarse_s + refine_s,
-                phases: BTreeMap::from([
-                    ("coarse".to_string(), coarse_s),
-                    ("select".to_string(), s.select),
-                    ("hulls".to_string(), s.hulls),
-                    ("load".to_string(), s.load),
-                    ("refine".to_string(), s.refine),
-                    // The refinement's own before/after scoring, part of its command.
-                    ("evaluate".to_string(), s.evaluate),
-                ]),
+                seconds: coarse_cost.wall + counted.wall,
+                phases,
+                cpu_seconds: coarse_cost.cpu.zip(counted.cpu).map(|(a, b)| a + b),
+                cpu_phases,
                 iou,
                 psnr,
                 gaussians: outcome.splats.len(),
@@ -147,12 +197,15 @@ pub fn run_hierarchy(
             iterations: config.full_iterations,
             ..config.run.clone()
         };
-        let (full, full_s) = train_twin(ctx, dataset, &full_run, "full")?;
+        let (full, full_cost) = train_twin(ctx, dataset, &full_run, "full")?;
         let (iou, psnr) = score(&full)?;
+        let (phases, cpu_phases) = phase_maps(&[("full", full_cost)]);
         rows.push(HierarchyRow {
             method: Method::Full,
-            seconds: full_s,
-            phases: BTreeMap::from([("full".to_string(), full_s)]),
+            seconds: full_cost.wall,
+            phases,
+            cpu_seconds: full_cost.cpu,
+            cpu_phases,
             iou,
             psnr,
             gaussians: full.len(),

@@ -5,7 +5,9 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use crate::report::ChartError;
-use crate::report::tradeoff_chart::{TradeoffPoint, write_tradeoff_chart};
+use crate::report::tradeoff_chart::{
+    TimeAxis, TradeoffPoint, write_tradeoff_chart, write_tradeoff_chart_on,
+};
 use crate::studies::hierarchy::rows::HierarchyRow;
 
 impl From<&HierarchyRow> for TradeoffPoint {
@@ -19,14 +21,39 @@ impl From<&HierarchyRow> for TradeoffPoint {
     }
 }
 
-/// Writes the chart of `rows` as `<stem>.png` and `<stem>.svg` into `dir`.
+/// Writes the chart of `rows` against wall time as `<stem>.png` and `<stem>.svg` into `dir`,
+/// and, when every row has its CPU seconds, against CPU time as `<stem>-cpu.png` and `.svg`.
 pub fn write_hierarchy_chart(
     dir: &Path,
     stem: &str,
     rows: &[HierarchyRow],
 ) -> Result<Vec<PathBuf>, ChartError> {
     let points: Vec<TradeoffPoint> = rows.iter().map(TradeoffPoint::from).collect();
-    write_tradeoff_chart(dir, stem, &points)
+    let mut written = write_tradeoff_chart(dir, stem, &points)?;
+    let on_cpu: Option<Vec<TradeoffPoint>> = rows
+        .iter()
+        .map(|row| {
+            Some(TradeoffPoint {
+                seconds: row.cpu_seconds?,
+                ..TradeoffPoint::from(row)
+            })
+        })
+        .collect();
+    if let Some(points) = on_cpu.filter(|p| !p.is_empty()) {
+        let cpu_stem = format!("{stem}-cpu");
+        written.extend(write_tradeoff_chart_on(
+            dir,
+            &cpu_stem,
+            &points,
+            TimeAxis::Cpu,
+        )?);
+    }
+    Ok(written)
+}
+
+/// A figure with `decimals` decimals, empty where missing.
+fn or_blank(value: Option<f64>, decimals: usize) -> String {
+    value.map_or(String::new(), |v| format!("{v:.decimals$}"))
 }
 
 fn classes(rows: &[HierarchyRow]) -> Vec<String> {
@@ -37,10 +64,11 @@ fn classes(rows: &[HierarchyRow]) -> Vec<String> {
         .collect()
 }
 
-/// The rows as CSV: method, seconds, psnr, gaussians, then one IoU column per class.
+/// The rows as CSV: method, seconds, cpu_seconds (empty where not recorded), psnr, gaussians,
+/// then one IoU column per class.
 pub fn hierarchy_csv(rows: &[HierarchyRow]) -> String {
     let classes = classes(rows);
-    let mut out = String::from("method,seconds,psnr,gaussians");
+    let mut out = String::from("method,seconds,cpu_seconds,psnr,gaussians");
     for c in &classes {
         let _ = write!(out, ",iou_{c}");
     }
@@ -48,9 +76,10 @@ pub fn hierarchy_csv(rows: &[HierarchyRow]) -> String {
     for r in rows {
         let _ = write!(
             out,
-            "{},{:.1},{:.3},{}",
+            "{},{:.1},{},{:.3},{}",
             r.method.name(),
             r.seconds,
+            or_blank(r.cpu_seconds, 1),
             r.psnr,
             r.gaussians
         );
@@ -65,11 +94,11 @@ pub fn hierarchy_csv(rows: &[HierarchyRow]) -> String {
 /// The rows as a Markdown table (for docs/).
 pub fn hierarchy_table(rows: &[HierarchyRow]) -> String {
     let classes = classes(rows);
-    let mut out = String::from("| method | wall time | PSNR |");
+    let mut out = String::from("| method | wall time | CPU time | PSNR |");
     for c in &classes {
         let _ = write!(out, " {c} IoU |");
     }
-    out.push_str(" Gaussians |\n|---|---|---|");
+    out.push_str(" Gaussians |\n|---|---|---|---|");
     for _ in &classes {
         out.push_str("---|");
     }
@@ -77,9 +106,11 @@ pub fn hierarchy_table(rows: &[HierarchyRow]) -> String {
     for r in rows {
         let _ = write!(
             out,
-            "| {} | {:.0} s | {:.2} dB |",
+            "| {} | {:.0} s | {} | {:.2} dB |",
             r.method.name(),
             r.seconds,
+            r.cpu_seconds
+                .map_or("–".to_string(), |cpu| format!("{cpu:.0} s")),
             r.psnr
         );
         for c in &classes {

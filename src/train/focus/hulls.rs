@@ -429,4 +429,84 @@ mod tests {
         let region = regions(&splats, &[0, 1, 2, 3, 4], 0.15);
         assert_eq!(region, vec![0, 0, 0, 1, 1]);
     }
+
+    #[test]
+    fn hulls_from_the_selections_tiles_are_the_whole_renders_hulls() {
+        use crate::raster::RenderSettings;
+        use crate::raster::weight_lift::WeightLift;
+        use crate::scene::{Camera, Intrinsics};
+        // A wall of Gaussians at z = 0 and two "cracks" (thin rows of small Gaussians just in
+        // front of it, one partly behind a blob), seen from z = 5 at 192×128 (12 × 8 tiles).
+        let mut splats = Splats::empty(0, 0);
+        let mut rng = fastrand::Rng::with_seed(3);
+        let mut push = |splats: &mut Splats, mean: Vec3, scale: f32, opacity: f32| {
+            let id = splats.len() as u64;
+            let colour = [rng.f32(), rng.f32(), rng.f32()];
+            splats.push(
+                mean,
+                Vec3::splat(scale.ln()),
+                glam::Quat::IDENTITY,
+                opacity,
+                &colour,
+                &[],
+                id,
+                0,
+            );
+        };
+        for i in 0..300 {
+            let (x, y) = ((i % 20) as f32 * 0.3 - 3.0, (i / 20) as f32 * 0.3 - 2.1);
+            push(&mut splats, Vec3::new(x, y, 0.0), 0.12, 1.0);
+        }
+        let first_crack = splats.len() as u32;
+        for i in 0..30 {
+            let t = i as f32 / 29.0;
+            push(
+                &mut splats,
+                Vec3::new(-2.2 + t, -1.0 + 0.5 * t, 0.2),
+                0.03,
+                2.0,
+            );
+            push(
+                &mut splats,
+                Vec3::new(1.0 + 0.8 * t, 0.8 - t, 0.2),
+                0.03,
+                2.0,
+            );
+        }
+        let selected: Vec<u32> = (first_crack..splats.len() as u32).collect();
+        push(&mut splats, Vec3::new(-1.8, -0.8, 1.5), 0.15, 3.0);
+        let region_of: Vec<u32> = (0..selected.len() as u32).map(|i| i % 2).collect();
+        let k = Intrinsics {
+            width: 192,
+            height: 128,
+            fx: 110.0,
+            fy: 110.0,
+            cx: 96.0,
+            cy: 64.0,
+        };
+        let camera = Camera::new(k, glam::Quat::IDENTITY, Vec3::new(0.0, 0.0, 5.0));
+        let settings = RenderSettings::new(Vec3::ZERO, splats.sh_degree);
+        let config = HullConfig::default();
+        let draw = |weights: &[f32], lift: &WeightLift| {
+            let visible: Vec<bool> = weights.iter().map(|&w| w > 0.1).collect();
+            view_hulls(
+                lift.projected(),
+                &visible,
+                &selected,
+                &region_of,
+                &config,
+                k.width,
+                k.height,
+            )
+        };
+        let mut whole = WeightLift::new(&splats, 1, settings);
+        let weights = whole.view(&camera, |_, _| 1.0).to_vec();
+        let plain = draw(&weights, &whole);
+        let mut focused = WeightLift::new(&splats, 1, settings);
+        let weights = focused.view_of(&camera, &selected, |_, _| 1.0).to_vec();
+        let fast = draw(&weights, &focused);
+        assert_eq!(plain.len(), 2, "one hull per crack");
+        assert!(plain.iter().all(|h| h.area() > 100));
+        assert_eq!(fast, plain, "hull masks differ from the whole render's");
+    }
 }

@@ -83,8 +83,11 @@ impl Focus<'_> {
         let mut drawn = Vec::with_capacity(views.len());
         for (done, &(index, heldout)) in views.iter().enumerate() {
             let camera = self.dataset.view_camera(index, self.scale)?;
-            let weights = lift.view(&camera, |_, _| 1.0);
-            // Visible: draws at least a tenth of a pixel's worth in this view.
+            // Only the tiles the set is binned into: its weights are those of the whole
+            // render, bit for bit, at a fraction of its cost (`WeightLift::view_of`).
+            let weights = lift.view_of(&camera, gaussians, |_, _| 1.0);
+            // Visible: draws at least a tenth of a pixel's worth in this view (read only for
+            // the set's Gaussians).
             let visible: Vec<bool> = weights.iter().map(|&w| w > 0.1).collect();
             let projected = lift.projected();
             let k = camera.intrinsics;
