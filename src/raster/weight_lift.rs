@@ -140,18 +140,27 @@ mod tests {
     use crate::scene::Intrinsics;
     use glam::{Quat, Vec3};
 
-    fn scene() -> (Splats, Camera) {
+    /// `count` Gaussians of random colour and opacity, centres uniform in ±`half.x` × ±`half.y`
+    /// × [0, 2), sizes uniform in `size` (metres), seen by a `width`×`height` camera of focal
+    /// `focal` at z = 4 looking down the axis.
+    fn scattered(
+        seed: u64,
+        count: u64,
+        half: glam::Vec2,
+        size: std::ops::Range<f32>,
+        (width, height, focal): (u32, u32, f32),
+    ) -> (Splats, Camera) {
         let mut splats = Splats::empty(0, 0);
-        let mut rng = fastrand::Rng::with_seed(5);
-        for id in 0..40 {
+        let mut rng = fastrand::Rng::with_seed(seed);
+        for id in 0..count {
             let mean = Vec3::new(
-                rng.f32() * 2.0 - 1.0,
-                rng.f32() * 2.0 - 1.0,
+                rng.f32() * 2.0 * half.x - half.x,
+                rng.f32() * 2.0 * half.y - half.y,
                 rng.f32() * 2.0,
             );
             splats.push(
                 mean,
-                Vec3::splat((0.05 + 0.1 * rng.f32()).ln()),
+                Vec3::splat((size.start + (size.end - size.start) * rng.f32()).ln()),
                 Quat::IDENTITY,
                 rng.f32() * 4.0 - 1.0,
                 &[rng.f32(), rng.f32(), rng.f32()],
@@ -161,17 +170,21 @@ mod tests {
             );
         }
         let k = Intrinsics {
-            width: 48,
-            height: 40,
-            fx: 40.0,
-            fy: 40.0,
-            cx: 24.0,
-            cy: 20.0,
+            width,
+            height,
+            fx: focal,
+            fy: focal,
+            cx: width as f32 / 2.0,
+            cy: height as f32 / 2.0,
         };
         (
             splats,
             Camera::new(k, Quat::IDENTITY, Vec3::new(0.0, 0.0, 4.0)),
         )
+    }
+
+    fn scene() -> (Splats, Camera) {
+        scattered(5, 40, glam::Vec2::new(1.0, 1.0), 0.05..0.15, (48, 40, 40.0))
     }
 
     #[test]
@@ -222,36 +235,12 @@ mod tests {
 
     /// 400 small Gaussians scattered over a 160×128 image (10 × 8 tiles), some behind others.
     fn wide_scene() -> (Splats, Camera) {
-        let mut splats = Splats::empty(0, 0);
-        let mut rng = fastrand::Rng::with_seed(11);
-        for id in 0..400 {
-            let mean = Vec3::new(
-                rng.f32() * 4.0 - 2.0,
-                rng.f32() * 3.2 - 1.6,
-                rng.f32() * 2.0,
-            );
-            splats.push(
-                mean,
-                Vec3::splat((0.02 + 0.06 * rng.f32()).ln()),
-                Quat::IDENTITY,
-                rng.f32() * 4.0 - 1.0,
-                &[rng.f32(), rng.f32(), rng.f32()],
-                &[],
-                id,
-                0,
-            );
-        }
-        let k = Intrinsics {
-            width: 160,
-            height: 128,
-            fx: 140.0,
-            fy: 140.0,
-            cx: 80.0,
-            cy: 64.0,
-        };
-        (
-            splats,
-            Camera::new(k, Quat::IDENTITY, Vec3::new(0.0, 0.0, 4.0)),
+        scattered(
+            11,
+            400,
+            glam::Vec2::new(2.0, 1.6),
+            0.02..0.08,
+            (160, 128, 140.0),
         )
     }
 
