@@ -5,6 +5,7 @@ use std::time::Instant;
 
 /// User + system CPU seconds of the whole process (every thread) so far, from `getrusage`;
 /// `None` where the call fails.
+#[cfg(unix)]
 pub fn process_cpu_seconds() -> Option<f64> {
     let mut usage = std::mem::MaybeUninit::<libc::rusage>::zeroed();
     // SAFETY: `getrusage` writes one `rusage` into the pointer it is given, which points to a
@@ -17,6 +18,12 @@ pub fn process_cpu_seconds() -> Option<f64> {
     let usage = unsafe { usage.assume_init() };
     let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
     Some(seconds(usage.ru_utime) + seconds(usage.ru_stime))
+}
+
+/// No `getrusage` off Unix: the CPU figures are left empty there.
+#[cfg(not(unix))]
+pub fn process_cpu_seconds() -> Option<f64> {
+    None
 }
 
 /// Wall and CPU time since it was started: one phase of a run.
