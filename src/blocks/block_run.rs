@@ -65,11 +65,19 @@ pub struct BlockRecord {
 /// The record of block `k`'s result when it is finished for this plan (its model beside it):
 /// rerunning it is then a no-op.
 pub fn finished(plan_dir: &Path, plan: &Plan, k: usize) -> Option<BlockRecord> {
-    let folder = result_folder(plan_dir, k);
-    let text = std::fs::read_to_string(folder.join("block.json")).ok()?;
-    let record: BlockRecord = serde_json::from_str(&text).ok()?;
-    (record.plan_digest == plan.digest() && record.block == k && folder.join("model.ply").is_file())
-        .then_some(record)
+    let record: BlockRecord = committed_record(&result_folder(plan_dir, k), "block.json")?;
+    (record.plan_digest == plan.digest() && record.block == k).then_some(record)
+}
+
+/// The record `record_file` of a committed run folder (`commit_model`) when it reads and its
+/// `model.ply` is beside it; `None` otherwise (not run, or what a killed run left).
+pub(crate) fn committed_record<R: serde::de::DeserializeOwned>(
+    folder: &Path,
+    record_file: &str,
+) -> Option<R> {
+    let text = std::fs::read_to_string(folder.join(record_file)).ok()?;
+    let record = serde_json::from_str(&text).ok()?;
+    folder.join("model.ply").is_file().then_some(record)
 }
 
 /// A trained block.

@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::blocks::block_run::{commit_model, load_photos, run_config};
+use crate::blocks::block_run::{commit_model, committed_record, load_photos, run_config};
 use crate::blocks::plan::Plan;
 use crate::damage::setup::model_and_spec;
 use crate::scene::run_folder::RunFolder;
@@ -51,10 +51,8 @@ pub struct ContextRecord {
 
 /// The record of the context when it is finished for this plan (its model beside it).
 pub fn context_finished(plan_dir: &Path, plan: &Plan) -> Option<ContextRecord> {
-    let folder = context_folder(plan_dir);
-    let text = std::fs::read_to_string(folder.join("context.json")).ok()?;
-    let record: ContextRecord = serde_json::from_str(&text).ok()?;
-    (record.plan_digest == plan.digest() && folder.join("model.ply").is_file()).then_some(record)
+    let record: ContextRecord = committed_record(&context_folder(plan_dir), "context.json")?;
+    (record.plan_digest == plan.digest()).then_some(record)
 }
 
 /// The finished context's Gaussians; a plan with a context whose job has not finished is a
