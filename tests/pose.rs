@@ -347,13 +347,7 @@ fn without_gps_the_mapper_draw_registering_most_photos_is_kept_ties_by_reproject
     let summary = summary.unwrap();
     assert_eq!(summary["chosen_seed"], 3);
     assert_eq!(names_in(&summary), ["01.png", "02.png", "03.png", "04.png"]);
-    let registered: Vec<u64> = summary["mapper_draws"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|d| d["registered"].as_u64().unwrap())
-        .collect();
-    assert_eq!(registered, [3, 4, 4, 0, 0]);
+    assert_eq!(draws_field(&summary, "registered"), [3, 4, 4, 0, 0]);
     // The draws without a model are no failure of the run: no failed log beside the dataset.
     assert!(!dir.path().join("ds.pose-failed.log").exists());
 }
@@ -413,22 +407,28 @@ impl LundDraws {
     }
 }
 
-fn seeds_of(summary: &serde_json::Value) -> Vec<u64> {
+/// `field` (a count: `seed`, `registered`) of every mapper draw in `pose.json`, in draw order.
+fn draws_field(summary: &serde_json::Value, field: &str) -> Vec<u64> {
     summary["mapper_draws"]
         .as_array()
         .unwrap()
         .iter()
-        .map(|d| d["seed"].as_u64().unwrap())
+        .map(|d| d[field].as_u64().unwrap())
         .collect()
+}
+
+/// What each GPS-draw test starts from: the real Python, a temporary folder and `LundDraws` in
+/// it; `None` (with the skip line) without pycolmap or the shared data.
+fn lund_draws_setup() -> Option<(PathBuf, tempfile::TempDir, LundDraws)> {
+    let python = real_python()?;
+    let dir = tempfile::tempdir().unwrap();
+    let lund = LundDraws::new(dir.path())?;
+    Some((python, dir, lund))
 }
 
 #[test]
 fn with_gps_a_draw_registering_more_photos_far_from_their_gps_loses_to_one_that_agrees() {
-    let Some(python) = real_python() else {
-        return;
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let Some(lund) = LundDraws::new(dir.path()) else {
+    let Some((python, dir, lund)) = lund_draws_setup() else {
         return;
     };
     fake_draw(dir.path(), 1, &lund.wrong([0, 5, 2, 7, 4, 1, 6, 3]), 0.5);
@@ -444,17 +444,13 @@ fn with_gps_a_draw_registering_more_photos_far_from_their_gps_loses_to_one_that_
     assert!(rms(0) > 2.0 * rms(1), "{draws:?}");
     // The kept draw is plausible: five draws, no warning.
     assert_eq!(summary["gps_plausible"], true, "{draws:?}");
-    assert_eq!(seeds_of(&summary), [1, 2, 3, 4, 5]);
+    assert_eq!(draws_field(&summary, "seed"), [1, 2, 3, 4, 5]);
     assert!(stderr(&out).is_empty(), "{}", stderr(&out));
 }
 
 #[test]
 fn when_every_draw_is_far_from_the_gps_more_seeds_run_then_a_warning_says_so() {
-    let Some(python) = real_python() else {
-        return;
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let Some(lund) = LundDraws::new(dir.path()) else {
+    let Some((python, dir, lund)) = lund_draws_setup() else {
         return;
     };
     // Seeds 1–5: wrong models (the photos' order along the street shuffled); no later seed
@@ -475,7 +471,7 @@ fn when_every_draw_is_far_from_the_gps_more_seeds_run_then_a_warning_says_so() {
     let draws = summary["mapper_draws"].as_array().unwrap();
     // Ten more draws, none plausible: the least wrong of all kept, flagged and warned about.
     assert_eq!(
-        seeds_of(&summary),
+        draws_field(&summary, "seed"),
         (1..=15).collect::<Vec<u64>>(),
         "{draws:?}"
     );
@@ -512,11 +508,7 @@ fn when_every_draw_is_far_from_the_gps_more_seeds_run_then_a_warning_says_so() {
 
 #[test]
 fn when_every_first_draw_is_far_from_the_gps_a_later_seed_that_agrees_is_kept() {
-    let Some(python) = real_python() else {
-        return;
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let Some(lund) = LundDraws::new(dir.path()) else {
+    let Some((python, dir, lund)) = lund_draws_setup() else {
         return;
     };
     for seed in 1..=5 {
@@ -530,7 +522,7 @@ fn when_every_first_draw_is_far_from_the_gps_a_later_seed_that_agrees_is_kept() 
     let draws = summary["mapper_draws"].as_array().unwrap();
     // Seeds 6 and 7 make no model; seed 8 agrees and the draws stop there.
     assert_eq!(
-        seeds_of(&summary),
+        draws_field(&summary, "seed"),
         (1..=8).collect::<Vec<u64>>(),
         "{draws:?}"
     );

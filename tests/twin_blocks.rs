@@ -15,7 +15,7 @@ use damage_twin::splats::Splats;
 use damage_twin::splats::ply::read_splats;
 
 mod blocks_support;
-use blocks_support::{binary, cluster_local_two_workers, run};
+use blocks_support::{binary, cluster_local_two_workers, partition_in_two, run};
 
 /// A two-span bridge at 96×54 (survey 1: 24 views; survey 2: 12, new damage on one span).
 fn tiny_bridge(root: &Path) -> PathBuf {
@@ -112,19 +112,19 @@ fn block_part(model: &Splats, plan: &damage_twin::blocks::Plan, k: usize) -> Vec
         .collect()
 }
 
+/// The tiny bridge's survey 1 partitioned into `ROOT/plan` (two blocks, 60 steps, seed 5, and
+/// the `extra` flags).
+fn partition_bridge(root: &Path, bridge: &Path, extra: &[&str]) -> PathBuf {
+    let plan = root.join("plan");
+    partition_in_two(&bridge.join("survey-1"), &plan, "60", extra);
+    plan
+}
+
 #[test]
 fn a_partitioned_twin_updates_only_its_changed_blocks() {
     let root = tempfile::tempdir().unwrap();
     let bridge = tiny_bridge(root.path());
-    let plan = root.path().join("plan");
-    let mut partition = binary();
-    partition
-        .arg("partition")
-        .arg(bridge.join("survey-1"))
-        .arg("--out")
-        .arg(&plan)
-        .args(["--blocks", "2", "--iters", "60", "--seed", "5"]);
-    run(partition);
+    let plan = partition_bridge(root.path(), &bridge, &[]);
     let merged = root.path().join("merged");
     cluster_local_two_workers(&plan, &merged);
     let first_plan = snapshot(&plan);
@@ -263,16 +263,11 @@ fn a_partitioned_twin_with_a_context_updates_its_changed_blocks_without_one() {
     // part of the model — the context's Gaussians there with it — as it was.
     let root = tempfile::tempdir().unwrap();
     let bridge = tiny_bridge(root.path());
-    let plan = root.path().join("plan");
-    let mut partition = binary();
-    partition
-        .arg("partition")
-        .arg(bridge.join("survey-1"))
-        .arg("--out")
-        .arg(&plan)
-        .args(["--blocks", "2", "--iters", "60", "--seed", "5"])
-        .args(["--context-iters", "40", "--context-scale", "2"]);
-    run(partition);
+    let plan = partition_bridge(
+        root.path(),
+        &bridge,
+        &["--context-iters", "40", "--context-scale", "2"],
+    );
     let merged = root.path().join("merged");
     cluster_local_two_workers(&plan, &merged);
     let report: serde_json::Value =

@@ -53,14 +53,19 @@ pub fn tiny_plan_with(root: &Path, plan: &str, extra: &[&str]) -> PathBuf {
         damage_twin::synth::generate(&params, &|_, _| {}).expect("synth");
     }
     let out = root.join(plan);
+    partition_in_two(&synth.join("survey-1"), &out, "80", extra);
+    out
+}
+
+/// `partition DATASET --out OUT --blocks 2 --iters ITERS --seed 5` with the `extra` flags.
+pub fn partition_in_two(dataset: &Path, out: &Path, iters: &str, extra: &[&str]) {
     let mut partition = binary();
     partition
         .arg("partition")
-        .arg(synth.join("survey-1"))
+        .arg(dataset)
         .arg("--out")
-        .arg(&out)
-        .args(["--blocks", "2", "--iters", "80", "--seed", "5"])
+        .arg(out)
+        .args(["--blocks", "2", "--iters", iters, "--seed", "5"])
         .args(extra);
     run(partition);
-    out
 }
