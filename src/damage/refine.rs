@@ -130,9 +130,7 @@ pub fn refine_from(
     config: &RefineConfig,
 ) -> Result<RefineOutcome, JobError> {
     let started = PhaseClock::start();
-    let mut seconds = PhaseSeconds::default();
-    // Stays Some while every phase's CPU time could be read.
-    let mut cpu = Some(PhaseSeconds::default());
+    let mut times = PhaseTimes::new();
     let mode = config.select.mode;
     let (train_idx, heldout_idx) =
         split_views(dataset, &config.holdout).map_err(JobError::Invalid)?;
@@ -151,8 +149,7 @@ pub fn refine_from(
         None => select_by_masks(ctx, dataset, model, config, &train_idx, masks.as_ref())?,
     };
     let n = model.len();
-    seconds.select = t.wall_seconds();
-    record_cpu(&mut cpu, &t, |c| &mut c.select);
+    times.record(&t, |p| &mut p.select);
     ctx.log(format!(
         "selection: {} filtered, {} validated, {} with neighbours",
         selection.filtered.len(),
@@ -203,8 +200,7 @@ pub fn refine_from(
             config.hulls.dilate_px,
         )?;
     }
-    seconds.hulls = t.wall_seconds();
-    record_cpu(&mut cpu, &t, |c| &mut c.hulls);
+    times.record(&t, |p| &mut p.hulls);
 
     // 3. The crops of the training views' hulls, at the refinement scale.
     let t = PhaseClock::start();
@@ -232,8 +228,7 @@ pub fn refine_from(
         trained.len(),
         100.0 * hull_fraction
     ));
-    seconds.load = t.wall_seconds();
-    record_cpu(&mut cpu, &t, |c| &mut c.load);
+    times.record(&t, |p| &mut p.load);
 
     // 4. Train the selection.
     let t = PhaseClock::start();
@@ -268,8 +263,7 @@ pub fn refine_from(
         heldout: Vec::new(),
     };
     let outcome = run_training(ctx, setup, "refine")?;
-    seconds.refine = t.wall_seconds();
-    record_cpu(&mut cpu, &t, |c| &mut c.refine);
+    times.record(&t, |p| &mut p.refine);
     let mut refined = (*outcome.splats).clone();
     mark_refined(&mut refined, model, &selection);
 
@@ -283,10 +277,8 @@ pub fn refine_from(
     let before = quality(&focus, baseline, &heldout, config.background, &readout)?;
     let after = quality(&focus, &refined, &heldout, config.background, &readout)?;
     let hull_coverage = hull_coverage(&focus, &heldout)?;
-    seconds.evaluate = t.wall_seconds();
-    record_cpu(&mut cpu, &t, |c| &mut c.evaluate);
-    seconds.total = started.wall_seconds();
-    record_cpu(&mut cpu, &started, |c| &mut c.total);
+    times.record(&t, |p| &mut p.evaluate);
+    times.record(&started, |p| &mut p.total);
 
     let (width, height) = (views[0].width, views[0].height);
     let report = RefineReport {
@@ -304,8 +296,8 @@ pub fn refine_from(
         hulls: trained.iter().map(|v| v.hull_count).sum(),
         hull_fraction,
         hull_coverage,
-        seconds,
-        cpu_seconds: cpu,
+        seconds: times.wall,
+        cpu_seconds: times.cpu,
         selection_seconds: selection.seconds,
         gaussians_before: baseline.len(),
         gaussians_after: refined.len(),
@@ -326,17 +318,30 @@ pub fn refine_from(
     })
 }
 
-/// Writes `clock`'s CPU seconds into the phase `field` of `cpu`, or gives up on CPU times
-/// (None) when they cannot be read.
-fn record_cpu(
-    cpu: &mut Option<PhaseSeconds>,
-    clock: &PhaseClock,
-    field: fn(&mut PhaseSeconds) -> &mut f64,
-) {
-    *cpu = cpu.take().and_then(|mut phases| {
-        *field(&mut phases) = clock.cpu_seconds()?;
-        Some(phases)
-    });
+/// Wall and CPU seconds per phase, as a refinement records them.
+struct PhaseTimes {
+    wall: PhaseSeconds,
+    /// Stays Some while every phase's CPU time could be read.
+    cpu: Option<PhaseSeconds>,
+}
+
+impl PhaseTimes {
+    fn new() -> PhaseTimes {
+        PhaseTimes {
+            wall: PhaseSeconds::default(),
+            cpu: Some(PhaseSeconds::default()),
+        }
+    }
+
+    /// Writes `clock`'s wall and CPU seconds into the phase `field`, giving up on CPU times
+    /// (None) when they cannot be read.
+    fn record(&mut self, clock: &PhaseClock, field: fn(&mut PhaseSeconds) -> &mut f64) {
+        *field(&mut self.wall) = clock.wall_seconds();
+        self.cpu = self.cpu.take().and_then(|mut phases| {
+            *field(&mut phases) = clock.cpu_seconds()?;
+            Some(phases)
+        });
+    }
 }
 
 /// The refinement's training spec: the focused run on the selection `trainable`, with the
