@@ -401,18 +401,22 @@ fn clear_near_floaters(
     let mut lift = WeightLift::new(model, 1, settings);
     let mut over_damage = vec![0.0f32; model.len()];
     for &view in views {
-        let near = near_floaters(model, &dataset.views[view].camera);
-        if !near.iter().any(|&f| f) {
+        let near: Vec<u32> = near_floaters(model, &dataset.views[view].camera)
+            .iter()
+            .enumerate()
+            .filter_map(|(g, &floats)| floats.then_some(g as u32))
+            .collect();
+        if near.is_empty() {
             continue;
         }
         let (camera, view_masks) =
             dataset.load_view_masks(view, masks.as_ref(), config.select_scale)?;
         let damage = |p: usize| view_masks.values().any(|m| m.data[p] != 0);
-        let weights = lift.view(&camera, |p, _| f32::from(damage(p)));
-        for (g, &w) in weights.iter().enumerate() {
-            if near[g] {
-                over_damage[g] += w;
-            }
+        // Only the near floaters' weights are read: rendering their tiles gives them bit for
+        // bit (`WeightLift::view_of`).
+        let weights = lift.view_of(&camera, &near, |p, _| f32::from(damage(p)));
+        for &g in &near {
+            over_damage[g as usize] += weights[g as usize];
         }
     }
     let cleared: Vec<usize> = (0..model.len())
