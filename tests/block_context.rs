@@ -80,7 +80,25 @@ fn a_block_renders_the_context_frozen_and_the_merge_keeps_it_outside_every_box()
     let again = run(again);
     assert!(String::from_utf8_lossy(&again.stdout).contains("already trained"));
     assert_eq!(std::fs::read(&model).unwrap(), before);
-    let context = damage_twin::splats::ply::read_splats(&model).unwrap();
+    // Blocks start from the context's Gaussians inside their boxes. At 40 steps the context has
+    // not densified, so it holds as many there as the initial points: every other one inside
+    // block 0's box is dropped, so that the start tells the two apart.
+    let context = {
+        let mut context = damage_twin::splats::ply::read_splats(&model).unwrap();
+        let mut inside = 0;
+        let keep: Vec<bool> = context
+            .means
+            .iter()
+            .map(|&p| {
+                let trains = plan.trains_point(0, plan.frame.coordinates(p));
+                inside += trains as usize;
+                !trains || inside % 2 == 0
+            })
+            .collect();
+        context.retain(&keep);
+        damage_twin::splats::ply::write_splats(&model, &context).unwrap();
+        context
+    };
 
     // Block 0 trained in this process: the context's Gaussians outside its box come out of the
     // run as they went in, bit for bit; its result holds only its own.
@@ -111,6 +129,10 @@ fn a_block_renders_the_context_frozen_and_the_merge_keeps_it_outside_every_box()
         "the block changed a frozen context Gaussian"
     );
     assert_eq!(outcome.record.context_gaussians, Some(frozen.len()));
+    // It started from the context's Gaussians inside its box (a trained start), not from the
+    // initial points.
+    let inside_block = context.len() - outside_block.len();
+    assert_eq!(outcome.record.initial_gaussians, Some(inside_block));
     let own = &outcome.splats;
     assert!(!own.is_empty());
     assert!(
