@@ -86,7 +86,9 @@ where
         })
         .collect();
     let (left, right) = root.split_horizontally(root.dim_in_pixel().0 / 2);
-    let (x0, x1) = span(rows.iter().map(|r| r.seconds), 0.1);
+    // A fifth of the span on the right: each mark's name is written to its right, and at 0.1
+    // the rightmost names were cut off.
+    let (x0, x1) = span(rows.iter().map(|r| r.seconds), 0.2);
     let x = (x0.min(0.0), x1);
     let classes: Vec<String> = rows
         .iter()
