@@ -466,6 +466,27 @@ mod tests {
             let of_candidates = validated(Tiles::OfCandidates);
             assert!(!whole.is_empty());
             assert_eq!(of_candidates, whole, "{validation:?}");
+            // One kept candidate alone: no other candidate's tiles cover for a tile of its own.
+            for &(g, class) in whole.iter().take(4) {
+                let alone = [(g, Some(class))];
+                let validated = |tiles| {
+                    validate(
+                        &splats,
+                        &views,
+                        &alone,
+                        &config,
+                        Vec3::ZERO,
+                        tiles,
+                        &mut |_, _| {},
+                    )
+                };
+                assert_eq!(validated(Tiles::All), vec![(g, class)], "{validation:?}");
+                assert_eq!(
+                    validated(Tiles::OfCandidates),
+                    vec![(g, class)],
+                    "{validation:?}"
+                );
+            }
         }
     }
 
