@@ -181,15 +181,9 @@ pub fn select(
     let t = Instant::now();
     let kept: Vec<(u32, DamageClass)> = match config.validation {
         Validation::None => filtered,
-        Validation::Vote | Validation::Lift => validate(
-            splats,
-            views,
-            &candidates,
-            config,
-            background,
-            Tiles::OfCandidates,
-            on_view,
-        ),
+        Validation::Vote | Validation::Lift => {
+            validate(splats, views, &candidates, config, background, on_view)
+        }
     };
     selection.validated = kept.iter().map(|&(g, _)| g).collect();
     selection.validated_class = kept.iter().map(|&(_, c)| c).collect();
@@ -201,19 +195,6 @@ pub fn select(
     selection
 }
 
-/// The tiles a validation renders per view.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Tiles {
-    /// Every tile (the plain render, kept for the tests to compare with).
-    #[cfg_attr(not(test), allow(dead_code))]
-    All,
-    /// Only the tiles the candidates are binned into, when they are fewer than the model
-    /// (`WeightLift::view_of`: their weights are the whole render's, bit for bit). A
-    /// refinement's candidates are the Gaussians its labels mark, a few thousand of tens of
-    /// thousands; an update's are every Gaussian, whose render stays whole.
-    OfCandidates,
-}
-
 /// Keeps the candidates the views' masks confirm.
 fn validate(
     splats: &Splats,
@@ -221,7 +202,6 @@ fn validate(
     candidates: &[(u32, Option<DamageClass>)],
     config: &SelectConfig,
     background: glam::Vec3,
-    tiles: Tiles,
     on_view: &mut dyn FnMut(usize, usize),
 ) -> Vec<(u32, DamageClass)> {
     let classes = DamageClass::ALL.len();
@@ -234,14 +214,11 @@ fn validate(
     let all = classes;
     let mut seen = vec![0u32; candidates.len()];
     let mut inside = vec![0u32; candidates.len()];
-    let subset: Option<Vec<u32>> = (tiles == Tiles::OfCandidates
-        && candidates.len() < splats.len())
-    .then(|| candidates.iter().map(|&(g, _)| g).collect());
     for (done, view) in views.iter().enumerate() {
         let k = &view.camera.intrinsics;
         let width = k.width as usize;
         let masks = &view.masks;
-        let weight_of = |p: usize, c: usize| {
+        let per_gaussian = lift.view(&view.camera, |p, c| {
             if c == classes {
                 1.0
             } else {
@@ -250,11 +227,7 @@ fn validate(
                     _ => 0.0,
                 }
             }
-        };
-        let per_gaussian = match &subset {
-            Some(subset) => lift.view_of(&view.camera, subset, weight_of),
-            None => lift.view(&view.camera, weight_of),
-        };
+        });
         for (i, &(g, class)) in candidates.iter().enumerate() {
             let w = &per_gaussian[g as usize * channels..(g as usize + 1) * channels];
             for c in 0..classes {
@@ -435,58 +408,6 @@ mod tests {
                 0.75
             };
             assert!(r >= min_recall, "{validation:?}: recall {r}");
-        }
-    }
-
-    #[test]
-    fn validating_on_the_candidates_tiles_keeps_what_the_whole_render_keeps() {
-        let (splats, _, views) = wall(30);
-        for validation in [Validation::Lift, Validation::Vote] {
-            let config = SelectConfig {
-                classes: vec![DamageClass::Crack],
-                validation,
-                ..SelectConfig::default()
-            };
-            let candidates: Vec<(u32, Option<DamageClass>)> = (0..splats.len())
-                .filter_map(|g| candidate_class(&splats, g, &config).map(|c| (g as u32, Some(c))))
-                .collect();
-            assert!(candidates.len() < splats.len() && !candidates.is_empty());
-            let validated = |tiles| {
-                validate(
-                    &splats,
-                    &views,
-                    &candidates,
-                    &config,
-                    Vec3::ZERO,
-                    tiles,
-                    &mut |_, _| {},
-                )
-            };
-            let whole = validated(Tiles::All);
-            let of_candidates = validated(Tiles::OfCandidates);
-            assert!(!whole.is_empty());
-            assert_eq!(of_candidates, whole, "{validation:?}");
-            // One kept candidate alone: no other candidate's tiles cover for a tile of its own.
-            for &(g, class) in whole.iter().take(4) {
-                let alone = [(g, Some(class))];
-                let validated = |tiles| {
-                    validate(
-                        &splats,
-                        &views,
-                        &alone,
-                        &config,
-                        Vec3::ZERO,
-                        tiles,
-                        &mut |_, _| {},
-                    )
-                };
-                assert_eq!(validated(Tiles::All), vec![(g, class)], "{validation:?}");
-                assert_eq!(
-                    validated(Tiles::OfCandidates),
-                    vec![(g, class)],
-                    "{validation:?}"
-                );
-            }
         }
     }
 
