@@ -15,9 +15,13 @@ use damage_twin::splats::Splats;
 use damage_twin::splats::model::{NO_SURVEY, logit, sigmoid};
 use damage_twin::timeline::Twin;
 use damage_twin::timeline::changes::{DetectConfig, OLD_DAMAGE_THRESHOLD, detect};
+use damage_twin::timeline::seed::{SeedConfig, seed_new_damage, seed_new_damage_rendered};
 use damage_twin::timeline::survey::AlignMode;
-use damage_twin::timeline::update::{UpdateConfig, update_job};
+use damage_twin::timeline::update::{
+    UpdateConfig, clear_near_floaters, fit_appearance, update_job,
+};
 use damage_twin::train::job::JobOptions;
+use damage_twin::train::views::split_views;
 
 #[test]
 fn detection_and_update_keep_the_history() {
@@ -108,7 +112,7 @@ fn detection_and_update_keep_the_history() {
             ..RefineConfig::default()
         },
         appearance: true,
-        seeds: Some(damage_twin::timeline::seed::SeedConfig::default()),
+        seeds: Some(SeedConfig::default()),
         clear_near_floaters: true,
     };
     let outcome = update_job(
@@ -207,6 +211,72 @@ fn detection_and_update_keep_the_history() {
         sigmoid(updated.raw_opacities[floater])
     );
     assert_eq!(updated.meta.survey[floater], 1);
+}
+
+/// The update renders the twin it trains (its near floaters cleared) once per view for the
+/// light fit and the seeds: the seeds take the renders the fit kept, and are the same bit for
+/// bit as when they render the twin themselves.
+#[test]
+fn the_light_fit_and_the_seeds_share_their_renders() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (_, mut coarse) = twin_support::coarse_twin(dir.path(), 2);
+    let dataset = damage_twin::scene::Dataset::open(
+        &dir.path().join("synth/survey-2"),
+        &damage_twin::scene::open::OpenOptions::default(),
+    )
+    .expect("opens survey 2");
+    put_floater(&mut coarse, &dataset.views[1].camera);
+    let config = RefineConfig {
+        scale: ImageScale::Factor(1),
+        select_scale: ImageScale::Factor(2),
+        ..RefineConfig::default()
+    };
+    let (train_idx, _) = split_views(&dataset, &config.holdout).expect("splits");
+    let mut trained = coarse.clone();
+    let cleared = clear_near_floaters(&mut trained, &dataset, &train_idx, &config).expect("clears");
+    assert!(!cleared.is_empty(), "the floater is cleared");
+    let readout = DamageReadout::for_model(&coarse, Palette::default());
+
+    let plain = fit_appearance(&trained, &dataset, &config, &readout, &[]).expect("fits");
+    assert!(plain.renders.is_empty());
+    let shared = fit_appearance(&trained, &dataset, &config, &readout, &train_idx).expect("fits");
+    assert_eq!(shared.lights, plain.lights);
+    assert_eq!(shared.pooled, plain.pooled);
+    assert_eq!(
+        shared.renders.keys().copied().collect::<Vec<_>>(),
+        train_idx
+    );
+
+    let settings = damage_twin::raster::RenderSettings::new(config.background, coarse.sh_degree);
+    let seed_config = SeedConfig::default();
+    let mut seeded_plain = trained.clone();
+    let report_plain = seed_new_damage(
+        &mut seeded_plain,
+        &dataset,
+        &train_idx,
+        config.scale,
+        &settings,
+        &readout,
+        &shared.lights,
+        &seed_config,
+    )
+    .expect("seeds");
+    let mut seeded = trained.clone();
+    let report = seed_new_damage_rendered(
+        &mut seeded,
+        &dataset,
+        &train_idx,
+        config.scale,
+        &settings,
+        &readout,
+        &shared.lights,
+        &seed_config,
+        &shared.renders,
+    )
+    .expect("seeds");
+    assert_eq!(report, report_plain);
+    assert!(seeded.len() > trained.len(), "seeds were planted");
+    assert!(seeded == seeded_plain, "the seeded models differ");
 }
 
 /// Appends an opaque, undamaged Gaussian a tenth of the median depth in front of `camera`, wide

@@ -242,10 +242,22 @@ pub fn evaluate_damage(
     let mut scores = DamageScores::default();
     for view in views {
         rasterizer.forward(&splats, &view.camera, &settings, &mut out);
-        let predicted = predicted_masks(&out, &readout);
-        scores.add_view_where(&predicted, &view.reference, view.used.as_ref());
+        score_render(&mut scores, &out, view, &readout);
     }
     scores
+}
+
+/// Adds `view`'s damage as the render `out` of it shows it (a render of the model `readout`
+/// prepared, as `evaluate_damage` makes it) to `scores`: for a caller that renders the view for
+/// another figure too.
+pub fn score_render(
+    scores: &mut DamageScores,
+    out: &RenderOutput,
+    view: &ReferenceView,
+    readout: &DamageReadout,
+) {
+    let predicted = predicted_masks(out, readout);
+    scores.add_view_where(&predicted, &view.reference, view.used.as_ref());
 }
 
 #[cfg(test)]
@@ -309,5 +321,67 @@ mod tests {
         assert_eq!(masks[0].data, vec![1, 0]);
         assert_eq!(masks[1].data, vec![0, 1]);
         assert_eq!(masks[2].data, vec![0, 1]);
+    }
+
+    /// `score_render` on a render made by `raster::render` (a fresh rasterizer, as the
+    /// refinement's scoring makes it for the PSNR too) gives `evaluate_damage`'s scores, whose
+    /// rasterizer is reused across the views: the scoring may share one render per view.
+    #[test]
+    fn scoring_a_shared_render_is_evaluating() {
+        use crate::scene::Intrinsics;
+        use glam::Quat;
+        let mut model = Splats::empty(0, 3);
+        let sh = vec![0.0; model.sh_coeffs() * 3];
+        for i in 0..40 {
+            let (x, y) = ((i % 8) as f32 * 0.3 - 1.0, (i / 8) as f32 * 0.3 - 0.6);
+            let crack = if i % 3 == 0 { 3.0 } else { -3.0 };
+            model.push(
+                Vec3::new(x, y, 5.0 + 0.01 * i as f32),
+                Vec3::splat((0.12f32).ln()),
+                Quat::IDENTITY,
+                1.5,
+                &sh,
+                &[crack, -3.0, if i % 5 == 0 { 2.0 } else { -3.0 }],
+                i,
+                crate::splats::model::NO_SURVEY,
+            );
+        }
+        let k = Intrinsics {
+            width: 40,
+            height: 30,
+            fx: 40.0,
+            fy: 40.0,
+            cx: 20.0,
+            cy: 15.0,
+        };
+        let views: Vec<ReferenceView> = [0.0f32, 0.2, -0.3]
+            .iter()
+            .map(|&x| {
+                let mut crack = Mask::empty(40, 30);
+                for p in (0..crack.data.len()).step_by(3) {
+                    crack.data[p] = 1;
+                }
+                ReferenceView {
+                    name: format!("view {x}"),
+                    camera: Camera::new(k, Quat::IDENTITY, Vec3::new(x, 0.0, 0.0)),
+                    reference: vec![Some(crack), None, Some(Mask::empty(40, 30))],
+                    used: None,
+                }
+            })
+            .collect();
+        let readout = DamageReadout::for_model(&model, Palette::default());
+        let background = Vec3::new(0.1, 0.2, 0.3);
+        let whole = evaluate_damage(&model, &views, &readout, background);
+        let settings = RenderSettings::new(background, model.sh_degree);
+        let mut shared = DamageScores::default();
+        for view in &views {
+            let out = crate::raster::render(&model, &view.camera, &settings);
+            score_render(&mut shared, &out, view, &readout);
+        }
+        assert_eq!(shared, whole);
+        assert!(
+            whole.classes.values().any(|a| a.true_positive > 0),
+            "{whole:?}"
+        );
     }
 }

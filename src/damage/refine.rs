@@ -16,7 +16,7 @@ use crate::damage::refine_quality::{hull_coverage, quality, step_costs};
 use crate::damage::refine_selection::{given_selection, region_labels, select_by_masks};
 use crate::damage::select::Selection;
 use crate::damage::setup::apply_mode;
-use crate::metrics::PhaseClock;
+use crate::metrics::{PhaseClock, PhaseTimes};
 use crate::scene::Dataset;
 use crate::splats::Splats;
 use crate::splats::model::state;
@@ -130,7 +130,7 @@ pub fn refine_from(
     config: &RefineConfig,
 ) -> Result<RefineOutcome, JobError> {
     let started = PhaseClock::start();
-    let mut times = PhaseTimes::new();
+    let mut times = PhaseTimes::<PhaseSeconds>::new();
     let mode = config.select.mode;
     let (train_idx, heldout_idx) =
         split_views(dataset, &config.holdout).map_err(JobError::Invalid)?;
@@ -316,32 +316,6 @@ pub fn refine_from(
         report,
         cancelled: outcome.cancelled,
     })
-}
-
-/// Wall and CPU seconds per phase, as a refinement records them.
-struct PhaseTimes {
-    wall: PhaseSeconds,
-    /// Stays Some while every phase's CPU time could be read.
-    cpu: Option<PhaseSeconds>,
-}
-
-impl PhaseTimes {
-    fn new() -> PhaseTimes {
-        PhaseTimes {
-            wall: PhaseSeconds::default(),
-            cpu: Some(PhaseSeconds::default()),
-        }
-    }
-
-    /// Writes `clock`'s wall and CPU seconds into the phase `field`, giving up on CPU times
-    /// (None) when they cannot be read.
-    fn record(&mut self, clock: &PhaseClock, field: fn(&mut PhaseSeconds) -> &mut f64) {
-        *field(&mut self.wall) = clock.wall_seconds();
-        self.cpu = self.cpu.take().and_then(|mut phases| {
-            *field(&mut phases) = clock.cpu_seconds()?;
-            Some(phases)
-        });
-    }
 }
 
 /// The refinement's training spec: the focused run on the selection `trainable`, with the

@@ -9,7 +9,9 @@ use serde::Serialize;
 
 use crate::damage::DamageClass;
 use crate::damage::TrainMode;
-use crate::damage::evaluate::{DamageReadout, ReferenceView, evaluate_damage};
+use crate::damage::evaluate::{
+    DamageReadout, DamageScores, ReferenceView, evaluate_damage, score_render,
+};
 use crate::damage::reference::{load_reference_views, reference_source};
 use crate::raster::{RenderSettings, render};
 use crate::splats::Splats;
@@ -210,18 +212,41 @@ pub(super) fn quality(
     if indices.is_empty() {
         return Ok(q);
     }
-    if let Some(source) = reference_source(focus.dataset) {
-        let views = load_reference_views(focus.dataset, &source, &indices, focus.scale)?;
-        let figures = evaluate_damage(splats, &views, readout, background).figures();
+    let references = match reference_source(focus.dataset) {
+        Some(source) => Some(load_reference_views(
+            focus.dataset,
+            &source,
+            &indices,
+            focus.scale,
+        )?),
+        None => None,
+    };
+    let photos = focus.load(&indices, false, &|_| {})?;
+    // One render per view serves the damage scores and the PSNR where the readout reads the
+    // model as it is and the reference views' cameras are the photos' (always, at one scale):
+    // the second render of each view was the same bit for bit.
+    let (prepared, _) = readout.prepare(splats);
+    let share = matches!(prepared, std::borrow::Cow::Borrowed(_))
+        && references.as_ref().is_some_and(|views| {
+            views
+                .iter()
+                .zip(&photos)
+                .all(|(view, photo)| view.camera == photo.camera)
+        });
+    let mut shared_scores = DamageScores::default();
+    if let Some(views) = references.as_ref().filter(|_| !share) {
+        let figures = evaluate_damage(splats, views, readout, background).figures();
         q.iou = figures.iou;
         q.precision = figures.precision;
         q.recall = figures.recall;
     }
-    let photos = focus.load(&indices, false, &|_| {})?;
     let settings = RenderSettings::new(background, splats.sh_degree);
     let (mut se_out, mut n_out, mut se_all, mut n_all) = (0.0f64, 0usize, 0.0f64, 0usize);
-    for (photo, v) in photos.iter().zip(heldout) {
+    for (i, (photo, v)) in photos.iter().zip(heldout).enumerate() {
         let out = render(splats, &photo.camera, &settings);
+        if let Some(views) = references.as_ref().filter(|_| share) {
+            score_render(&mut shared_scores, &out, &views[i], readout);
+        }
         let inside = v.union();
         for (p, (rgb, target)) in out
             .color
@@ -241,6 +266,12 @@ pub(super) fn quality(
                 n_out += 3;
             }
         }
+    }
+    if share {
+        let figures = shared_scores.figures();
+        q.iou = figures.iou;
+        q.precision = figures.precision;
+        q.recall = figures.recall;
     }
     let psnr = |se: f64, n: usize| (n > 0).then(|| -10.0 * (se / n as f64).max(1e-12).log10());
     q.psnr_outside_hulls = psnr(se_out, n_out);

@@ -51,6 +51,39 @@ impl PhaseClock {
     }
 }
 
+/// Wall and CPU seconds per phase of a run, each phase a field of `P` (a struct of seconds).
+#[derive(Clone, Debug)]
+pub struct PhaseTimes<P> {
+    pub wall: P,
+    /// Stays Some while every phase's CPU time could be read.
+    pub cpu: Option<P>,
+}
+
+impl<P: Default> PhaseTimes<P> {
+    pub fn new() -> PhaseTimes<P> {
+        PhaseTimes {
+            wall: P::default(),
+            cpu: Some(P::default()),
+        }
+    }
+
+    /// Writes `clock`'s wall and CPU seconds into the phase `field`, giving up on CPU times
+    /// (None) when they cannot be read.
+    pub fn record(&mut self, clock: &PhaseClock, field: fn(&mut P) -> &mut f64) {
+        *field(&mut self.wall) = clock.wall_seconds();
+        self.cpu = self.cpu.take().and_then(|mut phases| {
+            *field(&mut phases) = clock.cpu_seconds()?;
+            Some(phases)
+        });
+    }
+}
+
+impl<P: Default> Default for PhaseTimes<P> {
+    fn default() -> Self {
+        PhaseTimes::new()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

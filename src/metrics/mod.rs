@@ -9,7 +9,7 @@ pub mod memory;
 pub mod near_agreement;
 pub mod ssim;
 
-pub use cpu_time::{PhaseClock, process_cpu_seconds};
+pub use cpu_time::{PhaseClock, PhaseTimes, process_cpu_seconds};
 pub use image_quality::{psnr, psnr_masked};
 pub use mask_agreement::MaskAgreement;
 pub use memory::peak_rss_mb;

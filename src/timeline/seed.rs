@@ -14,7 +14,7 @@ use glam::{Quat, Vec3};
 
 use crate::damage::DamageClass;
 use crate::damage::evaluate::{DamageReadout, predicted_masks};
-use crate::raster::{RenderSettings, render};
+use crate::raster::{RenderOutput, RenderSettings, render};
 use crate::scene::{Dataset, ImageScale, Mask, SceneError};
 use crate::splats::Splats;
 use crate::splats::model::{SH_C0, logit};
@@ -91,6 +91,28 @@ pub fn seed_new_damage(
     lights: &ViewLights,
     config: &SeedConfig,
 ) -> Result<SeedReport, SceneError> {
+    let rendered = BTreeMap::new();
+    seed_new_damage_rendered(
+        model, dataset, train_idx, scale, settings, readout, lights, config, &rendered,
+    )
+}
+
+/// `seed_new_damage` with the renders of `model` (without its near floaters, at `scale`) that
+/// the caller already made, by view index: the update's light fit renders the same twin at
+/// the same views, and rendering it again cost a render per training view. Views missing from
+/// `rendered` are rendered here; the seeds are the same either way.
+#[allow(clippy::too_many_arguments)]
+pub fn seed_new_damage_rendered(
+    model: &mut Splats,
+    dataset: &Dataset,
+    train_idx: &[usize],
+    scale: ImageScale,
+    settings: &RenderSettings,
+    readout: &DamageReadout,
+    lights: &ViewLights,
+    config: &SeedConfig,
+    rendered: &BTreeMap<usize, RenderOutput>,
+) -> Result<SeedReport, SceneError> {
     if model.label_channels < DamageClass::ALL.len() {
         return Ok(SeedReport::default());
     }
@@ -104,12 +126,19 @@ pub fn seed_new_damage(
         if let Some(transform) = lights.get(&index) {
             transform.undo(&mut loaded.image);
         }
-        let out = render(
-            &without_near_floaters(model, &loaded.camera),
-            &loaded.camera,
-            settings,
-        );
-        let drawn = predicted_masks(&out, readout);
+        let own;
+        let out = match rendered.get(&index) {
+            Some(out) => out,
+            None => {
+                own = render(
+                    &without_near_floaters(model, &loaded.camera),
+                    &loaded.camera,
+                    settings,
+                );
+                &own
+            }
+        };
+        let drawn = predicted_masks(out, readout);
         let (w, h) = (loaded.image.width, loaded.image.height);
         let masks: Vec<Mask> = DamageClass::ALL
             .iter()
@@ -123,7 +152,7 @@ pub fn seed_new_damage(
                 drop_small(&new, config.min_area_px)
             })
             .collect();
-        voters.push((loaded.camera, surface_depth(&out), masks));
+        voters.push((loaded.camera, surface_depth(out), masks));
         views.push(SeedView {
             photo: loaded.image.data,
             candidates,

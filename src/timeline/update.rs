@@ -4,21 +4,22 @@
 //! renders in the new-damage colour while old damage keeps its class colour; the earlier
 //! survey's model is read, never written.
 
-use std::time::Instant;
+use std::collections::BTreeMap;
 
 use serde::Serialize;
 
 use crate::damage::evaluate::{DamageReadout, predicted_masks};
 use crate::damage::refine::{Quality, RefineConfig, RefineReport, refine_from};
+use crate::metrics::{PhaseClock, PhaseTimes};
 use crate::raster::weight_lift::WeightLift;
-use crate::raster::{RenderSettings, render};
+use crate::raster::{RenderOutput, RenderSettings, render};
 use crate::scene::project::ColourTransform;
 use crate::scene::{Dataset, Mask};
 use crate::splats::Splats;
 use crate::splats::model::{NO_SURVEY, logit, sigmoid};
 use crate::timeline::appearance::{fit_transform, unchanged_pixels};
 use crate::timeline::changes::{near_floaters, without_near_floaters};
-use crate::timeline::seed::{SeedConfig, SeedReport, seed_new_damage};
+use crate::timeline::seed::{SeedConfig, SeedReport, seed_new_damage_rendered};
 use crate::timeline::twin::{HISTORY_FILE, TimelineError, Twin};
 use crate::train::focus::{ViewLights, trained_or_created};
 use crate::train::history::{EvalSample, History};
@@ -115,7 +116,30 @@ pub struct UpdateReport {
     /// cameras (`clear_near_floaters`).
     pub near_floaters_cleared: usize,
     pub seconds: f64,
+    /// Wall seconds per phase of the update (the refinement's own phases are in `refine`).
+    pub phase_seconds: UpdatePhaseSeconds,
+    /// CPU seconds (user + system, every thread) per phase; None where the process's CPU time
+    /// cannot be read.
+    pub phase_cpu_seconds: Option<UpdatePhaseSeconds>,
     pub refine: RefineReport,
+}
+
+/// Seconds per phase of an update. `refine_evaluate` (the held-out scores before and after)
+/// and `previous_look` measure the update; the others make it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct UpdatePhaseSeconds {
+    /// Reading the earlier twin and opening the survey.
+    pub load: f64,
+    /// Clearing the earlier twin's near floaters over damage.
+    pub near_floaters: f64,
+    /// Fitting each photo's light (with the renders of the twin the seeds reuse).
+    pub appearance: f64,
+    pub seeds: f64,
+    /// The refinement, all its phases (`RefineReport::seconds` splits it).
+    pub refine: f64,
+    /// The earlier survey's held-out look before and after (`previous_look_psnr_*`).
+    pub previous_look: f64,
+    pub total: f64,
 }
 
 /// The updated model and its report.
@@ -250,7 +274,9 @@ pub fn update(
     name: &str,
     config: &UpdateConfig,
 ) -> Result<UpdateOutcome, JobError> {
-    let started = Instant::now();
+    let started = PhaseClock::start();
+    let mut times = PhaseTimes::<UpdatePhaseSeconds>::new();
+    let t = PhaseClock::start();
     let index = twin.survey_index(name).map_err(timeline_error)?;
     let previous = index
         .checked_sub(1)
@@ -275,22 +301,16 @@ pub fn update(
         mode: config.refine.select.mode,
         ..DamageReadout::for_model(&model, config.refine.select.palette)
     };
-
     let mut refine_config = config.refine.clone();
     refine_config.select.lift_unlabelled = true;
-    // Each photo's light relative to the twin's rides on its training view.
-    let mut lights = ViewLights::new();
-    let mut appearance = None;
-    if config.appearance {
-        ctx.log("fitting each photo's light against the twin");
-        let (fits, pooled) = fit_appearance(&model, &dataset, &refine_config, &readout)?;
-        lights = fits;
-        appearance = Some(pooled);
-    }
     let (train_idx, _) =
         split_views(&dataset, &refine_config.holdout).map_err(JobError::Invalid)?;
+    times.record(&t, |p| &mut p.load);
+
     // The twin as the update trains it: without its near floaters and with its new-damage
-    // seeds, when those are on; the twin itself otherwise.
+    // seeds, when those are on; the twin itself otherwise. The floaters are cleared first (they
+    // need no light), so the light fit renders the twin the seeds render, once per view.
+    let t = PhaseClock::start();
     let mut seeded = None;
     let mut cleared = Vec::new();
     if config.clear_near_floaters {
@@ -301,11 +321,35 @@ pub fn update(
             seeded = Some(without);
         }
     }
+    times.record(&t, |p| &mut p.near_floaters);
+
+    // Each photo's light relative to the twin's rides on its training view.
+    let t = PhaseClock::start();
+    let mut lights = ViewLights::new();
+    let mut appearance = None;
+    let mut rendered = BTreeMap::new();
+    if config.appearance {
+        ctx.log("fitting each photo's light against the twin");
+        let trained = seeded.as_ref().unwrap_or(&model);
+        // The seeds read the training views' renders only when they are on.
+        let keep: &[usize] = if config.seeds.is_some() {
+            &train_idx
+        } else {
+            &[]
+        };
+        let fit = fit_appearance(trained, &dataset, &refine_config, &readout, keep)?;
+        lights = fit.lights;
+        appearance = Some(fit.pooled);
+        rendered = fit.renders;
+    }
+    times.record(&t, |p| &mut p.appearance);
+
+    let t = PhaseClock::start();
     let seeds = match &config.seeds {
         Some(seed_config) => {
             let settings = RenderSettings::new(refine_config.background, model.sh_degree);
             let with_seeds = seeded.get_or_insert_with(|| model.clone());
-            let report = seed_new_damage(
+            let report = seed_new_damage_rendered(
                 with_seeds,
                 &dataset,
                 &train_idx,
@@ -314,14 +358,19 @@ pub fn update(
                 &readout,
                 &lights,
                 seed_config,
+                &rendered,
             )?;
             ctx.log(format!("new-damage seeds: {:?}", report.seeds));
             Some(report)
         }
         None => None,
     };
+    drop(rendered);
+    times.record(&t, |p| &mut p.seeds);
+    let t = PhaseClock::start();
     let seeded = seeded.as_ref().unwrap_or(&model);
     let outcome = refine_from(ctx, &dataset, &lights, &model, seeded, &refine_config)?;
+    times.record(&t, |p| &mut p.refine);
     let mut splats = (*outcome.splats).clone();
     // History: what the update trained or created changed in this survey (the seeds count as
     // created); damage nobody saw before is this survey's.
@@ -347,11 +396,14 @@ pub fn update(
         .iter()
         .filter(|&&s| s != NO_SURVEY && s < survey)
         .count();
+    let t = PhaseClock::start();
     let (look_before, look_after) = if outcome.cancelled {
         (None, None)
     } else {
         previous_look(twin, &previous, &model, &splats, &readout)?
     };
+    times.record(&t, |p| &mut p.previous_look);
+    times.record(&started, |p| &mut p.total);
     Ok(UpdateOutcome {
         splats,
         report: UpdateReport {
@@ -364,7 +416,9 @@ pub fn update(
             previous_look_psnr_after: look_after,
             seeds,
             near_floaters_cleared: cleared.len(),
-            seconds: started.elapsed().as_secs_f64(),
+            seconds: times.wall.total,
+            phase_seconds: times.wall,
+            phase_cpu_seconds: times.cpu,
             refine: outcome.report,
         },
         cancelled: outcome.cancelled,
@@ -388,7 +442,7 @@ const FLOATER_DAMAGE_WEIGHT: f32 = 1.0;
 /// (docs/TIMELINE.md). Detection, the light fit and the seeds already leave near floaters out;
 /// only those over damage are cleared here, because clearing every near floater (1,674 on the
 /// demo) cost survey 1's views 1.9 dB. Returns the indices cleared, ascending.
-fn clear_near_floaters(
+pub fn clear_near_floaters(
     model: &mut Splats,
     dataset: &Dataset,
     views: &[usize],
@@ -428,40 +482,60 @@ fn clear_near_floaters(
     Ok(cleared)
 }
 
-/// Per view, the light of its photo relative to the twin's render (fitted outside the damage,
-/// old and new, grown by 4 px), and the same fitted over every view at once.
-fn fit_appearance(
-    model: &Splats,
+/// What `fit_appearance` fitted, and the renders it made that the seeds reuse.
+pub struct LightFit {
+    /// Per view, the light of its photo relative to the twin's render.
+    pub lights: ViewLights,
+    /// The same fitted over every view at once.
+    pub pooled: ColourTransform,
+    /// Per view asked to keep, the twin's render (without its near floaters) the fit used.
+    pub renders: BTreeMap<usize, RenderOutput>,
+}
+
+/// Per view, the light of its photo relative to the render of `twin` (the twin as the update
+/// trains it: its near floaters over damage cleared), fitted outside the damage, old and new,
+/// grown by 4 px; and the same fitted over every view at once. The renders of the views `keep`
+/// are kept for the seeds, which lift the new damage onto the same twin at the same views.
+pub fn fit_appearance(
+    twin: &Splats,
     dataset: &Dataset,
     config: &RefineConfig,
     readout: &DamageReadout,
-) -> Result<(ViewLights, ColourTransform), JobError> {
-    let settings = RenderSettings::new(config.background, model.sh_degree);
-    let mut fits = ViewLights::new();
+    keep: &[usize],
+) -> Result<LightFit, JobError> {
+    let settings = RenderSettings::new(config.background, twin.sh_degree);
+    let mut lights = ViewLights::new();
+    let mut renders = BTreeMap::new();
     let (mut all_render, mut all_photo) = (Vec::new(), Vec::new());
     for index in 0..dataset.views.len() {
         let loaded = dataset.load_view(index, config.scale)?;
-        let seen = without_near_floaters(model, &loaded.camera);
+        let seen = without_near_floaters(twin, &loaded.camera);
         let out = render(&seen, &loaded.camera, &settings);
         let old = predicted_masks(&out, readout);
         let observed: Vec<&Mask> = loaded.masks.values().collect();
         let masks: Vec<&Mask> = old.iter().chain(observed).collect();
         let (w, h) = (loaded.image.width, loaded.image.height);
-        let keep = unchanged_pixels(&masks, w, h, 4);
-        fits.insert(
+        let keep_px = unchanged_pixels(&masks, w, h, 4);
+        lights.insert(
             index,
-            fit_transform(&out.color, &loaded.image.data, &|p| keep[p]),
+            fit_transform(&out.color, &loaded.image.data, &|p| keep_px[p]),
         );
         // Every 7th kept pixel of every view for the survey's pooled transform.
-        for (p, k) in keep.iter().enumerate() {
+        for (p, k) in keep_px.iter().enumerate() {
             if *k && p % 7 == 0 {
                 all_render.extend_from_slice(&out.color[p * 3..p * 3 + 3]);
                 all_photo.extend_from_slice(&loaded.image.data[p * 3..p * 3 + 3]);
             }
         }
+        if keep.contains(&index) {
+            renders.insert(index, out);
+        }
     }
-    let pooled = fit_transform(&all_render, &all_photo, &|_| true);
-    Ok((fits, pooled))
+    Ok(LightFit {
+        lights,
+        pooled: fit_transform(&all_render, &all_photo, &|_| true),
+        renders,
+    })
 }
 
 /// PSNR of the previous survey's held-out views outside the damage (theirs and the renders'),
