@@ -24,5 +24,6 @@ pub mod segment_survey;
 pub mod survey;
 pub mod twin;
 pub mod update;
+pub mod update_rates;
 
 pub use twin::{TimelineError, Twin};
