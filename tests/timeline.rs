@@ -15,7 +15,7 @@ use damage_twin::splats::Splats;
 use damage_twin::splats::model::{NO_SURVEY, logit, sigmoid};
 use damage_twin::timeline::Twin;
 use damage_twin::timeline::changes::{DetectConfig, OLD_DAMAGE_THRESHOLD, detect};
-use damage_twin::timeline::seed::{SeedConfig, seed_new_damage, seed_new_damage_rendered};
+use damage_twin::timeline::seed::{SeedConfig, seed_new_damage};
 use damage_twin::timeline::survey::AlignMode;
 use damage_twin::timeline::update::{
     UpdateConfig, clear_near_floaters, fit_appearance, update_job,
@@ -249,31 +249,26 @@ fn the_light_fit_and_the_seeds_share_their_renders() {
 
     let settings = damage_twin::raster::RenderSettings::new(config.background, coarse.sh_degree);
     let seed_config = SeedConfig::default();
-    let mut seeded_plain = trained.clone();
-    let report_plain = seed_new_damage(
-        &mut seeded_plain,
-        &dataset,
-        &train_idx,
-        config.scale,
-        &settings,
-        &readout,
-        &shared.lights,
-        &seed_config,
-    )
-    .expect("seeds");
-    let mut seeded = trained.clone();
-    let report = seed_new_damage_rendered(
-        &mut seeded,
-        &dataset,
-        &train_idx,
-        config.scale,
-        &settings,
-        &readout,
-        &shared.lights,
-        &seed_config,
-        &shared.renders,
-    )
-    .expect("seeds");
+    // Seeded with the seeds' own renders (none given) and with the light fit's.
+    let no_renders = std::collections::BTreeMap::new();
+    let seeded_with = |rendered| {
+        let mut seeded = trained.clone();
+        let report = seed_new_damage(
+            &mut seeded,
+            &dataset,
+            &train_idx,
+            config.scale,
+            &settings,
+            &readout,
+            &shared.lights,
+            &seed_config,
+            rendered,
+        )
+        .expect("seeds");
+        (seeded, report)
+    };
+    let (seeded_plain, report_plain) = seeded_with(&no_renders);
+    let (seeded, report) = seeded_with(&shared.renders);
     assert_eq!(report, report_plain);
     assert!(seeded.len() > trained.len(), "seeds were planted");
     assert!(seeded == seeded_plain, "the seeded models differ");

@@ -79,30 +79,13 @@ struct SeedView {
 
 /// Lifts the new damage of `dataset`'s views `train_idx` (at `scale`) onto the twin and appends
 /// a seed Gaussian per grid cell to `model`. `lights` maps each view's photo into the twin's
-/// light (views without one are taken as they are).
+/// light (views without one are taken as they are). `rendered` holds renders of `model`
+/// (without its near floaters, at `scale`) that the caller already made, by view index: the
+/// update's light fit renders the same twin at the same views, and rendering it again cost a
+/// render per training view. Views missing from `rendered` are rendered here; the seeds are the
+/// same either way.
 #[allow(clippy::too_many_arguments)]
 pub fn seed_new_damage(
-    model: &mut Splats,
-    dataset: &Dataset,
-    train_idx: &[usize],
-    scale: ImageScale,
-    settings: &RenderSettings,
-    readout: &DamageReadout,
-    lights: &ViewLights,
-    config: &SeedConfig,
-) -> Result<SeedReport, SceneError> {
-    let rendered = BTreeMap::new();
-    seed_new_damage_rendered(
-        model, dataset, train_idx, scale, settings, readout, lights, config, &rendered,
-    )
-}
-
-/// `seed_new_damage` with the renders of `model` (without its near floaters, at `scale`) that
-/// the caller already made, by view index: the update's light fit renders the same twin at
-/// the same views, and rendering it again cost a render per training view. Views missing from
-/// `rendered` are rendered here; the seeds are the same either way.
-#[allow(clippy::too_many_arguments)]
-pub fn seed_new_damage_rendered(
     model: &mut Splats,
     dataset: &Dataset,
     train_idx: &[usize],

@@ -19,7 +19,7 @@ use crate::splats::Splats;
 use crate::splats::model::{NO_SURVEY, logit, sigmoid};
 use crate::timeline::appearance::{fit_transform, unchanged_pixels};
 use crate::timeline::changes::{near_floaters, without_near_floaters};
-use crate::timeline::seed::{SeedConfig, SeedReport, seed_new_damage_rendered};
+use crate::timeline::seed::{SeedConfig, SeedReport, seed_new_damage};
 use crate::timeline::twin::{HISTORY_FILE, TimelineError, Twin};
 use crate::timeline::update_rates::{
     UPDATE_LABEL_RATE, UPDATE_LABEL_WEIGHT, update_learning_rates,
@@ -357,7 +357,7 @@ pub fn update(
         Some(seed_config) => {
             let settings = RenderSettings::new(refine_config.background, model.sh_degree);
             let with_seeds = seeded.get_or_insert_with(|| model.clone());
-            let report = seed_new_damage_rendered(
+            let report = seed_new_damage(
                 with_seeds,
                 &dataset,
                 &train_idx,
