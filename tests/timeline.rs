@@ -14,12 +14,11 @@ use damage_twin::scene::ImageScale;
 use damage_twin::splats::Splats;
 use damage_twin::splats::model::{NO_SURVEY, logit, sigmoid};
 use damage_twin::timeline::Twin;
+use damage_twin::timeline::appearance::fit_appearance;
 use damage_twin::timeline::changes::{DetectConfig, OLD_DAMAGE_THRESHOLD, detect};
 use damage_twin::timeline::seed::{SeedConfig, seed_new_damage};
 use damage_twin::timeline::survey::AlignMode;
-use damage_twin::timeline::update::{
-    UpdateConfig, clear_near_floaters, fit_appearance, update_job,
-};
+use damage_twin::timeline::update::{UpdateConfig, clear_near_floaters, update_job};
 use damage_twin::train::job::JobOptions;
 use damage_twin::train::views::split_views;
 

@@ -13,7 +13,17 @@
 //! against 1.9 dB with the per-channel fit: most of that loss has another cause
 //! (docs/TIMELINE.md).
 
-use crate::scene::Mask;
+use std::collections::BTreeMap;
+
+use crate::damage::evaluate::{DamageReadout, predicted_masks};
+use crate::damage::refine::RefineConfig;
+use crate::raster::{RenderOutput, RenderSettings, render};
+use crate::scene::project::ColourTransform;
+use crate::scene::{Dataset, Mask};
+use crate::splats::Splats;
+use crate::timeline::changes::without_near_floaters;
+use crate::train::focus::ViewLights;
+use crate::train::job::JobError;
 // The fit itself sits beneath `damage`, whose evaluation uses it too.
 pub use crate::train::light_fit::fit_transform;
 
@@ -38,6 +48,62 @@ pub fn unchanged_pixels(masks: &[&Mask], width: u32, height: u32, margin: u32) -
         }
     }
     keep
+}
+
+/// What `fit_appearance` fitted, and the renders it made that the seeds reuse.
+pub struct LightFit {
+    /// Per view, the light of its photo relative to the twin's render.
+    pub lights: ViewLights,
+    /// The same fitted over every view at once.
+    pub pooled: ColourTransform,
+    /// Per view asked to keep, the twin's render (without its near floaters) the fit used.
+    pub renders: BTreeMap<usize, RenderOutput>,
+}
+
+/// Per view, the light of its photo relative to the render of `twin` (the twin as the update
+/// trains it: its near floaters over damage cleared), fitted outside the damage, old and new,
+/// grown by 4 px; and the same fitted over every view at once. The renders of the views `keep`
+/// are kept for the seeds, which lift the new damage onto the same twin at the same views.
+pub fn fit_appearance(
+    twin: &Splats,
+    dataset: &Dataset,
+    config: &RefineConfig,
+    readout: &DamageReadout,
+    keep: &[usize],
+) -> Result<LightFit, JobError> {
+    let settings = RenderSettings::new(config.background, twin.sh_degree);
+    let mut lights = ViewLights::new();
+    let mut renders = BTreeMap::new();
+    let (mut all_render, mut all_photo) = (Vec::new(), Vec::new());
+    for index in 0..dataset.views.len() {
+        let loaded = dataset.load_view(index, config.scale)?;
+        let seen = without_near_floaters(twin, &loaded.camera);
+        let out = render(&seen, &loaded.camera, &settings);
+        let old = predicted_masks(&out, readout);
+        let observed: Vec<&Mask> = loaded.masks.values().collect();
+        let masks: Vec<&Mask> = old.iter().chain(observed).collect();
+        let (w, h) = (loaded.image.width, loaded.image.height);
+        let keep_px = unchanged_pixels(&masks, w, h, 4);
+        lights.insert(
+            index,
+            fit_transform(&out.color, &loaded.image.data, &|p| keep_px[p]),
+        );
+        // Every 7th kept pixel of every view for the survey's pooled transform.
+        for (p, k) in keep_px.iter().enumerate() {
+            if *k && p % 7 == 0 {
+                all_render.extend_from_slice(&out.color[p * 3..p * 3 + 3]);
+                all_photo.extend_from_slice(&loaded.image.data[p * 3..p * 3 + 3]);
+            }
+        }
+        if keep.contains(&index) {
+            renders.insert(index, out);
+        }
+    }
+    Ok(LightFit {
+        lights,
+        pooled: fit_transform(&all_render, &all_photo, &|_| true),
+        renders,
+    })
 }
 
 #[cfg(test)]
