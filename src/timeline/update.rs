@@ -132,8 +132,9 @@ pub struct UpdateReport {
     pub refine: RefineReport,
 }
 
-/// Seconds per phase of an update. `refine_evaluate` (the held-out scores before and after)
-/// and `previous_look` measure the update; the others make it.
+/// Seconds per phase of an update. `previous_look` and, inside `refine`, the refinement's
+/// held-out scoring before and after (`RefineReport`'s `evaluate` phase) measure the update; the
+/// others make it.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct UpdatePhaseSeconds {
     /// Reading the earlier twin and opening the survey.
