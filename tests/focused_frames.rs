@@ -3,14 +3,16 @@
 //! the image (every channel) and the trainable Gaussians' gradients are bit-identical, the
 //! frozen ones' gradients zero; the cache is rebuilt whenever its view's camera, the trainable
 //! set or the generation changes, and is really reused otherwise. A focused training run gives
-//! the same model with the cache as without it.
+//! the same model with the cache as without it, and with Adam's moments for the trainable
+//! Gaussians only as with moments for every one.
 
 use damage_twin::raster::{
     FrameFocus, Rasterizer, RenderOutput, RenderSettings, SplatGrads, tile_grid,
 };
 use damage_twin::scene::{Camera, Mask, RgbImage};
 use damage_twin::splats::Splats;
-use damage_twin::train::spec::{TrainSpec, TrainView};
+use damage_twin::train::densify::DensifyConfig;
+use damage_twin::train::spec::{DensifyPolicy, TrainSpec, TrainView};
 use damage_twin::train::trainer::Trainer;
 use glam::Vec3;
 
@@ -317,4 +319,55 @@ fn a_focused_run_trains_the_same_with_and_without_the_frozen_cache() {
     let (a, b) = (cached.splats(), whole.splats());
     assert_ne!(a.means, start.means, "training moved something");
     assert_eq!(a, b, "the models differ");
+}
+
+/// Adam's moments for the trainable Gaussians only (the default) against moments for every
+/// Gaussian (the layout before): the same losses and model bit for bit, fine-tuned as is and
+/// with density control (children appended, prunes, an opacity reset) in the run.
+#[test]
+fn a_focused_run_trains_the_same_with_moments_for_the_trainable_only() {
+    let target = labelled_model(2000, 21, LABELS);
+    let mut start = target.clone();
+    let trainable: Vec<bool> = (0..start.len()).map(|g| g % 4 == 1).collect();
+    let ids: Vec<u32> = (0..start.len() as u32)
+        .filter(|&g| trainable[g as usize])
+        .collect();
+    nudge(&mut start, &ids, 10);
+    let views = views(&target);
+    let densify = DensifyConfig {
+        start: 4,
+        stop: 30,
+        every: 8,
+        grad_threshold: 1e-6,
+        min_opacity: 0.05,
+        opacity_reset_every: 20,
+        ..DensifyConfig::default()
+    };
+    for policy in [DensifyPolicy::Off, DensifyPolicy::Adaptive(densify)] {
+        let mut spec = TrainSpec::reconstruction(32);
+        spec.trainable = Some(trainable.clone());
+        spec.sh_ramp_every = 0;
+        spec.eval_every = 0;
+        spec.targets.label_weight = 0.5;
+        spec.densify = policy.clone();
+        let mut listed = Trainer::new(spec.clone(), start.clone(), views.clone()).unwrap();
+        let mut every = Trainer::new(spec, start.clone(), views.clone()).unwrap();
+        every.keep_moments_for_every_gaussian();
+        while !listed.is_done() {
+            let (a, b) = (listed.step(), every.step());
+            assert_eq!(
+                a.loss.to_bits(),
+                b.loss.to_bits(),
+                "{policy:?}: step {}",
+                a.step
+            );
+            assert!(a.rolled_back.is_none());
+        }
+        let (a, b) = (listed.splats(), every.splats());
+        assert_ne!(a.means, start.means, "training moved something");
+        if let DensifyPolicy::Adaptive(_) = policy {
+            assert_ne!(a.len(), start.len(), "density control changed the count");
+        }
+        assert_eq!(a, b, "{policy:?}: the models differ");
+    }
 }

@@ -1,12 +1,14 @@
 //! Adam over the splat parameter groups (3DGS's optimiser): per-group learning rates and on/off
 //! switches, frozen Gaussians untouched (parameters and moments), optional visible-only
-//! updates, and moment state that follows densification. Knows nothing of losses or images.
+//! updates, and moment state that follows densification. In a focused run the moments can be
+//! kept for the trainable Gaussians only (`Adam::for_trainable`), so the frozen rest costs
+//! neither memory nor a pass of the update. Knows nothing of losses or images.
 
 use glam::{Vec3, Vec4};
 
 use super::schedule::ExponentialLr;
 use crate::splats::Splats;
-use update::{Update, update_group, update_sh_groups};
+use update::{GroupLayout, Update, update_group, update_sh_groups};
 
 mod update;
 
@@ -190,10 +192,15 @@ pub struct Adam {
     pub beta2: f32,
     /// 1e-15 as 3DGS sets it (torch's default 1e-8 would damp the tiny position updates).
     pub eps: f32,
+    /// Moments per slot: slot i is Gaussian i, or `listed[i]`.
     groups: [Moments; 7],
     /// Per group, an optional factor per Gaussian on its learning rate (see `set_rates`).
     rates: [Option<Vec<f32>>; 7],
+    /// Gaussians of the splats.
     len: usize,
+    /// The Gaussians that have moments, ascending (None: every one). Every other Gaussian is
+    /// frozen: its moments would stay zero, so they are not kept (`for_trainable`).
+    listed: Option<Vec<u32>>,
 }
 
 /// The first NaN/Inf an Adam step met, in group order: a gradient it applied, or a parameter it
@@ -218,16 +225,72 @@ impl std::fmt::Display for NonFinite {
 impl Adam {
     /// Zero moments for every Gaussian of `splats`.
     pub fn new(splats: &Splats) -> Adam {
+        Adam::with_slots(splats, None)
+    }
+
+    /// Zero moments for the Gaussians of `splats` not frozen (`meta.frozen`) only. A step never
+    /// changes a frozen Gaussian's moments, so they would stay zero: a focused run (a block
+    /// beside its frozen context, a refinement, a survey update) then keeps moments, and steps
+    /// them, for what it trains, with the same results as `new`. The frozen set must not
+    /// shrink afterwards: a Gaussian frozen here stays untouched even if unfrozen later.
+    /// Gaussians appended later (densification's children) get moments.
+    pub fn for_trainable(splats: &Splats) -> Adam {
+        let frozen = &splats.meta.frozen;
+        if !frozen.iter().any(|&f| f) {
+            return Adam::new(splats);
+        }
+        let listed = (0..splats.len() as u32)
+            .filter(|&g| !frozen[g as usize])
+            .collect();
+        Adam::with_slots(splats, Some(listed))
+    }
+
+    fn with_slots(splats: &Splats, listed: Option<Vec<u32>>) -> Adam {
         let n = splats.len();
+        let slots = listed.as_ref().map_or(n, Vec::len);
         let k = splats.sh_coeffs();
         let per = [3, 3, 4, 1, 3, (k - 1) * 3, splats.label_channels];
         Adam {
             beta1: 0.9,
             beta2: 0.999,
             eps: 1e-15,
-            groups: per.map(|p| Moments::zeros(n, p)),
+            groups: per.map(|p| Moments::zeros(slots, p)),
             rates: Default::default(),
             len: n,
+            listed,
+        }
+    }
+
+    /// The Gaussians that have moments, ascending (None: every one; see `for_trainable`).
+    pub fn listed(&self) -> Option<&[u32]> {
+        self.listed.as_deref()
+    }
+
+    /// The same state with moments for every Gaussian, zeros for those without (the layout of
+    /// `new`): a reference for comparisons.
+    pub fn with_every_gaussian(&self) -> Adam {
+        let mut every = self.clone();
+        let Some(list) = every.listed.take() else {
+            return every;
+        };
+        for (to, from) in every.groups.iter_mut().zip(&self.groups) {
+            let s = from.per_gaussian;
+            to.m = vec![0.0; self.len * s];
+            to.v = vec![0.0; self.len * s];
+            for (slot, &g) in list.iter().enumerate() {
+                let (at, from_at) = (g as usize * s, slot * s);
+                to.m[at..at + s].copy_from_slice(&from.m[from_at..from_at + s]);
+                to.v[at..at + s].copy_from_slice(&from.v[from_at..from_at + s]);
+            }
+        }
+        every
+    }
+
+    /// The moments' slot of Gaussian `gaussian` (None: it has none, being frozen).
+    fn slot(&self, gaussian: usize) -> Option<usize> {
+        match &self.listed {
+            None => Some(gaussian),
+            Some(list) => list.binary_search(&(gaussian as u32)).ok(),
         }
     }
 
@@ -315,6 +378,7 @@ impl Adam {
                 rate,
             }
         };
+        let listed = self.listed.as_deref();
         let (dc, rest) = (ParamGroup::ShDc.index(), ParamGroup::ShRest.index());
         let fuse_sh = groups.0[dc] && groups.0[rest] && k3 > 3;
         for group in ParamGroup::ALL {
@@ -331,8 +395,8 @@ impl Adam {
                     grads.v_sh,
                     (&mut head[dc], &mut tail[0]),
                     k3,
-                    u_dc,
-                    u_rest,
+                    (u_dc, u_rest),
+                    listed,
                 );
                 for (check, group) in checks
                     .into_iter()
@@ -346,32 +410,42 @@ impl Adam {
             }
             let mom = &mut self.groups[gi];
             let u = update(mom, lrs[gi], &splats.meta.frozen, self.rates[gi].as_deref());
+            let len = mom.per_gaussian;
+            let layout = |stride, offset| GroupLayout {
+                stride,
+                offset,
+                len,
+            };
             let check = match group {
                 ParamGroup::Means => {
                     let p: &mut [f32] = bytemuck::cast_slice_mut(&mut splats.means);
-                    update_group(p, bytemuck::cast_slice(grads.v_means), mom, 3, 0, u)
+                    let g = bytemuck::cast_slice(grads.v_means);
+                    update_group(p, g, mom, layout(3, 0), u, listed)
                 }
                 ParamGroup::LogScales => {
                     let p: &mut [f32] = bytemuck::cast_slice_mut(&mut splats.log_scales);
-                    update_group(p, bytemuck::cast_slice(grads.v_log_scales), mom, 3, 0, u)
+                    let g = bytemuck::cast_slice(grads.v_log_scales);
+                    update_group(p, g, mom, layout(3, 0), u, listed)
                 }
                 ParamGroup::Rotations => {
                     let p: &mut [f32] = bytemuck::cast_slice_mut(&mut splats.rotations);
-                    update_group(p, bytemuck::cast_slice(grads.v_rotations), mom, 4, 0, u)
+                    let g = bytemuck::cast_slice(grads.v_rotations);
+                    update_group(p, g, mom, layout(4, 0), u, listed)
                 }
-                ParamGroup::RawOpacities => update_group(
-                    &mut splats.raw_opacities,
-                    grads.v_raw_opacities,
-                    mom,
-                    1,
-                    0,
-                    u,
-                ),
-                ParamGroup::ShDc => update_group(&mut splats.sh, grads.v_sh, mom, k3, 0, u),
-                ParamGroup::ShRest => update_group(&mut splats.sh, grads.v_sh, mom, k3, 3, u),
+                ParamGroup::RawOpacities => {
+                    let (p, g) = (&mut splats.raw_opacities, grads.v_raw_opacities);
+                    update_group(p, g, mom, layout(1, 0), u, listed)
+                }
+                ParamGroup::ShDc => {
+                    update_group(&mut splats.sh, grads.v_sh, mom, layout(k3, 0), u, listed)
+                }
+                ParamGroup::ShRest => {
+                    update_group(&mut splats.sh, grads.v_sh, mom, layout(k3, 3), u, listed)
+                }
                 ParamGroup::RawLabels => {
                     let c = splats.label_channels;
-                    update_group(&mut splats.raw_labels, grads.v_raw_labels, mom, c, 0, u)
+                    let (p, g) = (&mut splats.raw_labels, grads.v_raw_labels);
+                    update_group(p, g, mom, layout(c, 0), u, listed)
                 }
             };
             if found.is_none() {
@@ -391,16 +465,36 @@ impl Adam {
         for r in self.rates.iter_mut().flatten() {
             r.resize(r.len() + n, 1.0);
         }
+        if let Some(list) = &mut self.listed {
+            list.extend(self.len as u32..(self.len + n) as u32);
+        }
         self.len += n;
     }
 
     /// Keeps the moments of Gaussians where `keep[g]` (the mask given to `Splats::retain`).
     pub fn retain(&mut self, keep: &[bool]) {
         assert_eq!(keep.len(), self.len, "retain mask length");
+        // Whether each slot's Gaussian stays, and the listed Gaussians' new indices.
+        let kept_slots: Vec<bool> = match &mut self.listed {
+            None => keep.to_vec(),
+            Some(list) => {
+                let kept: Vec<bool> = list.iter().map(|&g| keep[g as usize]).collect();
+                let mut new_index = Vec::with_capacity(keep.len());
+                let mut next = 0u32;
+                for &k in keep {
+                    new_index.push(next);
+                    next += u32::from(k);
+                }
+                let mut slots = kept.iter();
+                list.retain(|_| slots.next().copied().unwrap_or(false));
+                list.iter_mut().for_each(|g| *g = new_index[*g as usize]);
+                kept
+            }
+        };
         for g in &mut self.groups {
             let s = g.per_gaussian;
             let mut w = 0;
-            for (i, &k) in keep.iter().enumerate() {
+            for (i, &k) in kept_slots.iter().enumerate() {
                 if k {
                     g.m.copy_within(i * s..(i + 1) * s, w * s);
                     g.v.copy_within(i * s..(i + 1) * s, w * s);
@@ -424,7 +518,8 @@ impl Adam {
         mom.v.fill(0.0);
     }
 
-    /// A group's first and second moments, `per_gaussian` values per Gaussian.
+    /// A group's first and second moments, `per_gaussian` values per Gaussian (per listed
+    /// Gaussian when only some have moments: `listed`).
     pub fn moments(&self, g: ParamGroup) -> (&[f32], &[f32]) {
         let mom = &self.groups[g.index()];
         (&mom.m, &mom.v)
@@ -472,12 +567,16 @@ impl Adam {
         mom.v.iter_mut().for_each(|v| *v *= factor * factor);
     }
 
-    /// Zeroes the moments of one Gaussian in one group.
+    /// Zeroes the moments of one Gaussian in one group (nothing for a Gaussian without: they
+    /// are zero).
     pub fn reset_gaussian(&mut self, g: ParamGroup, gaussian: usize) {
+        let Some(slot) = self.slot(gaussian) else {
+            return;
+        };
         let mom = &mut self.groups[g.index()];
         let s = mom.per_gaussian;
-        mom.m[gaussian * s..(gaussian + 1) * s].fill(0.0);
-        mom.v[gaussian * s..(gaussian + 1) * s].fill(0.0);
+        mom.m[slot * s..(slot + 1) * s].fill(0.0);
+        mom.v[slot * s..(slot + 1) * s].fill(0.0);
     }
 }
 

@@ -303,3 +303,136 @@ fn per_gaussian_rates_scale_each_gaussians_steps() {
         s.means[2].x
     );
 }
+
+/// Seeded gradients in every group (a NaN in the frozen Gaussian `nan_at`, which no step may
+/// read).
+fn seeded_grads(s: &Splats, seed: u64, nan_at: usize) -> Grads {
+    let mut rng = fastrand::Rng::with_seed(seed);
+    let mut value = || rng.f32() - 0.5;
+    let mut grads = Grads {
+        v3: (0..s.len())
+            .map(|_| Vec3::new(value(), value(), value()))
+            .collect(),
+        v4: (0..s.len())
+            .map(|_| Vec4::new(value(), value(), value(), value()))
+            .collect(),
+        op: (0..s.len()).map(|_| value()).collect(),
+        sh: (0..s.sh.len()).map(|_| value()).collect(),
+        lb: (0..s.raw_labels.len()).map(|_| value()).collect(),
+    };
+    grads.op[nan_at] = f32::NAN;
+    grads.sh[nan_at * s.sh_coeffs() * 3 + 5] = f32::NAN;
+    grads
+}
+
+fn bits(values: &[f32]) -> Vec<u32> {
+    values.iter().map(|x| x.to_bits()).collect()
+}
+
+/// Moments for the trainable Gaussians only (`for_trainable`) step, grow, shrink and reset as
+/// moments for every Gaussian (`new`) do: the same parameters and reports bit for bit, the same
+/// moments where kept and zeros elsewhere. Several tasks' worth of listed Gaussians, so the list
+/// is split; every update path (contiguous groups gathered, per-Gaussian rates, the fused and
+/// the separate SH groups) runs.
+#[test]
+fn moments_for_the_trainable_only_match_moments_for_every_gaussian() {
+    let n = 8 * GAUSSIANS_PER_TASK + 77;
+    let mut dense_s = model(n);
+    let mut rng = fastrand::Rng::with_seed(5);
+    for g in 0..n {
+        // Runs of frozen Gaussians and scattered ones.
+        dense_s.meta.frozen[g] = (g / 37) % 3 != 0 || rng.f32() < 0.1;
+    }
+    let mut listed_s = dense_s.clone();
+    let mut dense = Adam::new(&dense_s);
+    let mut listed = Adam::for_trainable(&listed_s);
+    let tracked = listed
+        .listed()
+        .expect("only the trainable have moments")
+        .len();
+    assert!(tracked > GAUSSIANS_PER_TASK && tracked < n / 2, "{tracked}");
+    let rates: Vec<f32> = (0..n).map(|_| 0.5 + rng.f32()).collect();
+    for adam in [&mut dense, &mut listed] {
+        adam.set_rates(ParamGroup::LogScales, Some(rates.clone()))
+            .unwrap();
+    }
+    let lrs = [0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07];
+    for step in 0..12u64 {
+        let first_frozen = dense_s.meta.frozen.iter().position(|&f| f).unwrap();
+        let mut grads = seeded_grads(&dense_s, step, first_frozen);
+        let visible: Vec<bool> = (0..dense_s.len()).map(|_| rng.f32() < 0.8).collect();
+        let mut flags = GroupFlags::ALL_ON;
+        flags.set(ParamGroup::ShRest, step % 3 != 2);
+        flags.set(ParamGroup::Means, step % 4 != 3);
+        if step == 11 {
+            let trainable_visible = (0..dense_s.len())
+                .find(|&g| !dense_s.meta.frozen[g] && visible[g])
+                .unwrap();
+            grads.lb[trainable_visible * 2] = f32::INFINITY;
+        }
+        let a = dense.step(&mut dense_s, &grads.view(), &lrs, &flags, Some(&visible));
+        let b = listed.step(&mut listed_s, &grads.view(), &lrs, &flags, Some(&visible));
+        assert_eq!(a, b, "step {step}: reports");
+        assert_eq!(a.is_some(), step == 11, "step {step}: {a:?}");
+        match step {
+            // Densification's children, trainable, at the end.
+            4 => {
+                for s in [&mut dense_s, &mut listed_s] {
+                    for g in [3usize, 40, 41, 2000] {
+                        let (sh, labels) = (s.sh_of(g).to_vec(), s.labels_of(g).to_vec());
+                        let (mean, ls) = (s.means[g] + Vec3::X, s.log_scales[g]);
+                        let (rot, op) = (s.rotations[g], s.raw_opacities[g]);
+                        s.push(mean, ls, rot, op, &sh, &labels, (n + g) as u64, 0);
+                    }
+                }
+                dense.append(4);
+                listed.append(4);
+            }
+            // A prune of frozen and trainable Gaussians.
+            7 => {
+                let keep: Vec<bool> = (0..dense_s.len()).map(|_| rng.f32() < 0.9).collect();
+                for (s, adam) in [(&mut dense_s, &mut dense), (&mut listed_s, &mut listed)] {
+                    s.retain(&keep);
+                    adam.retain(&keep);
+                }
+            }
+            // An opacity reset's zeroing, frozen Gaussians included.
+            9 => {
+                for g in (0..dense_s.len()).step_by(7) {
+                    dense.reset_gaussian(ParamGroup::RawOpacities, g);
+                    listed.reset_gaussian(ParamGroup::RawOpacities, g);
+                }
+            }
+            _ => {}
+        }
+        for (p, q) in [
+            (&dense_s.sh, &listed_s.sh),
+            (&dense_s.raw_opacities, &listed_s.raw_opacities),
+            (&dense_s.raw_labels, &listed_s.raw_labels),
+        ] {
+            assert_eq!(bits(p), bits(q), "step {step}: parameters");
+        }
+        for (p, q) in [
+            (&dense_s.means, &listed_s.means),
+            (&dense_s.log_scales, &listed_s.log_scales),
+        ] {
+            let (p, q): (&[f32], &[f32]) = (bytemuck::cast_slice(p), bytemuck::cast_slice(q));
+            assert_eq!(bits(p), bits(q), "step {step}: geometry");
+        }
+        let (p, q): (&[f32], &[f32]) = (
+            bytemuck::cast_slice(&dense_s.rotations),
+            bytemuck::cast_slice(&listed_s.rotations),
+        );
+        assert_eq!(bits(p), bits(q), "step {step}: rotations");
+        let every = listed.with_every_gaussian();
+        for group in ParamGroup::ALL {
+            let ((m, v), (em, ev)) = (dense.moments(group), every.moments(group));
+            assert_eq!(bits(m), bits(em), "step {step}: {} m", group.name());
+            assert_eq!(bits(v), bits(ev), "step {step}: {} v", group.name());
+            assert_eq!(dense.steps(group), listed.steps(group));
+        }
+        assert_eq!(dense.len(), listed.len());
+    }
+    // Nothing frozen: moments for every Gaussian, without a list.
+    assert!(Adam::for_trainable(&model(3)).listed().is_none());
+}

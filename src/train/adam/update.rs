@@ -1,6 +1,7 @@
 //! Adam's update loops: one step of one group (or of both SH groups together) over every
-//! Gaussian, in rayon tasks of contiguous Gaussians, vectorised, with the NaN/Inf check fused
-//! in. The state, the rates and the group switches live in `adam.rs`.
+//! Gaussian, or over only the listed ones whose moments a focused run keeps, in rayon tasks of
+//! contiguous Gaussians (or of a contiguous part of the list), vectorised, with the NaN/Inf check
+//! fused in. The state, the rates and the group switches live in `mod.rs`.
 
 use rayon::prelude::*;
 
@@ -120,7 +121,37 @@ const MAX_CONTIGUOUS: usize = if MAX_LABEL_CHANNELS > 4 {
     4
 };
 
-/// One rayon task of [`update_group`]: Gaussians `first..first + p.len() / stride`.
+/// Which Gaussian each slot of a run of moments belongs to. The parameters and gradients passed
+/// with the run start at Gaussian `base`.
+#[derive(Clone, Copy)]
+pub(super) enum Slots<'a> {
+    /// Slot `i` is Gaussian `base + i`: every Gaussian has moments.
+    Every,
+    /// Slot `i` is Gaussian `list[i]` (ascending, at least `base`): only those have moments (the
+    /// trainable ones of a focused run; `Adam::for_trainable`).
+    Listed(&'a [u32]),
+}
+
+impl Slots<'_> {
+    #[inline(always)]
+    fn gaussian(&self, base: usize, slot: usize) -> usize {
+        match self {
+            Slots::Every => base + slot,
+            Slots::Listed(list) => list[slot] as usize,
+        }
+    }
+
+    /// Slots in a run whose parameters are `values` long, `stride` per Gaussian.
+    fn count(&self, values: usize, stride: usize) -> usize {
+        match self {
+            Slots::Every => values / stride,
+            Slots::Listed(list) => list.len(),
+        }
+    }
+}
+
+/// One rayon task of [`update_group`]: the Gaussians of `slots`, their parameters and gradients
+/// from Gaussian `base` on.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn update_chunk_impl(
@@ -128,50 +159,76 @@ fn update_chunk_impl(
     g: &[f32],
     m: &mut [f32],
     v: &mut [f32],
-    first: usize,
+    base: usize,
+    slots: Slots,
     stride: usize,
     offset: usize,
     len: usize,
     u: &Update,
 ) -> FiniteCheck {
-    let count = p.len() / stride;
+    let count = slots.count(p.len(), stride);
     let mut check = FiniteCheck::default();
     let keeps = |gi: usize| !(u.frozen[gi] || u.visible.is_some_and(|vis| !vis[gi]));
     if stride == len && len <= MAX_CONTIGUOUS && u.rate.is_none() {
-        // The group is the whole array: blocks of Gaussians, one flat (masked) run each.
+        // The group is the whole array: blocks of Gaussians, one flat (masked) run each. Listed
+        // Gaussians are gathered into one run and scattered back, so their block is one vector
+        // loop too (the update is per value: the same bits either way).
         let mut keep = [false; BLOCK_GAUSSIANS * MAX_CONTIGUOUS];
+        let mut gathered_p = [0.0f32; BLOCK_GAUSSIANS * MAX_CONTIGUOUS];
+        let mut gathered_g = [0.0f32; BLOCK_GAUSSIANS * MAX_CONTIGUOUS];
         let mut start = 0;
         while start < count {
             let end = count.min(start + BLOCK_GAUSSIANS);
+            let values = (end - start) * len;
             let mut all = true;
             for i in start..end {
-                let k = keeps(first + i);
+                let k = keeps(slots.gaussian(base, i));
                 all &= k;
                 let at = (i - start) * len;
                 keep[at..at + len].fill(k);
             }
-            let vals = start * len..end * len;
-            let (p, g) = (&mut p[vals.clone()], &g[vals.clone()]);
-            let (m, v) = (&mut m[vals.clone()], &mut v[vals]);
-            check = check.merge(if all {
-                adam_run(p, g, m, v, u)
-            } else {
-                adam_run_masked(p, g, m, v, &keep[..(end - start) * len], u)
+            let slot_values = start * len..end * len;
+            let (m, v) = (&mut m[slot_values.clone()], &mut v[slot_values.clone()]);
+            let keep = &keep[..values];
+            let run = |p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32]| {
+                if all {
+                    adam_run(p, g, m, v, u)
+                } else {
+                    adam_run_masked(p, g, m, v, keep, u)
+                }
+            };
+            check = check.merge(match slots {
+                Slots::Every => run(&mut p[slot_values.clone()], &g[slot_values], m, v),
+                Slots::Listed(list) => {
+                    let list = &list[start..end];
+                    for (j, &gi) in list.iter().enumerate() {
+                        let at = (gi as usize - base) * len;
+                        gathered_p[j * len..(j + 1) * len].copy_from_slice(&p[at..at + len]);
+                        gathered_g[j * len..(j + 1) * len].copy_from_slice(&g[at..at + len]);
+                    }
+                    let found = run(&mut gathered_p[..values], &gathered_g[..values], m, v);
+                    for (j, &gi) in list.iter().enumerate() {
+                        let at = (gi as usize - base) * len;
+                        p[at..at + len].copy_from_slice(&gathered_p[j * len..(j + 1) * len]);
+                    }
+                    found
+                }
             });
             start = end;
         }
         return check;
     }
     for i in 0..count {
-        if !keeps(first + i) {
+        let gi = slots.gaussian(base, i);
+        if !keeps(gi) {
             continue;
         }
-        let at = i * stride + offset;
+        let at = (gi - base) * stride + offset;
         let scaled;
         let u = match u.rate {
             Some(rate) => {
                 scaled = Update {
-                    lr: u.lr * rate[first + i],
+                    lr: u.lr * rate[gi],
                     ..*u
                 };
                 &scaled
@@ -198,7 +255,8 @@ simd_dispatch!(
         g: &[f32],
         m: &mut [f32],
         v: &mut [f32],
-        first: usize,
+        base: usize,
+        slots: Slots,
         stride: usize,
         offset: usize,
         len: usize,
@@ -206,8 +264,9 @@ simd_dispatch!(
     ) -> FiniteCheck
 );
 
-/// One rayon task of [`update_sh_groups`]: Gaussians `first..first + p.len() / k3`, their DC
-/// values (`dc`) then their higher bands (`rest`) one record at a time.
+/// One rayon task of [`update_sh_groups`]: the Gaussians of `slots` (their SH records from
+/// Gaussian `base` on), their DC values (`dc`) then their higher bands (`rest`) one record at
+/// a time.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn update_sh_chunk_impl(
@@ -215,23 +274,26 @@ fn update_sh_chunk_impl(
     g: &[f32],
     dc: (&mut [f32], &mut [f32]),
     rest: (&mut [f32], &mut [f32]),
-    first: usize,
+    base: usize,
+    slots: Slots,
     k3: usize,
     u_dc: &Update,
     u_rest: &Update,
 ) -> [FiniteCheck; 2] {
-    let count = p.len() / k3;
+    let count = slots.count(p.len(), k3);
     let r = k3 - 3;
     let (m_dc, v_dc) = dc;
     let (m_rest, v_rest) = rest;
     let mut checks = [FiniteCheck::default(); 2];
     for i in 0..count {
+        let gi = slots.gaussian(base, i);
         // Frozen and visible flags are the same for both groups.
-        if u_dc.frozen[first + i] || u_dc.visible.is_some_and(|vis| !vis[first + i]) {
+        if u_dc.frozen[gi] || u_dc.visible.is_some_and(|vis| !vis[gi]) {
             continue;
         }
-        let (p_dc, p_rest) = p[i * k3..(i + 1) * k3].split_at_mut(3);
-        let (g_dc, g_rest) = g[i * k3..(i + 1) * k3].split_at(3);
+        let at = (gi - base) * k3;
+        let (p_dc, p_rest) = p[at..at + k3].split_at_mut(3);
+        let (g_dc, g_rest) = g[at..at + k3].split_at(3);
         checks[0] = checks[0].merge(adam_run(
             p_dc,
             g_dc,
@@ -257,7 +319,8 @@ simd_dispatch!(
         g: &[f32],
         dc: (&mut [f32], &mut [f32]),
         rest: (&mut [f32], &mut [f32]),
-        first: usize,
+        base: usize,
+        slots: Slots,
         k3: usize,
         u_dc: &Update,
         u_rest: &Update,
@@ -266,32 +329,38 @@ simd_dispatch!(
 
 /// Both SH groups in one pass over the SH records (`k3` values per Gaussian: DC first), so each
 /// record and its gradient are read once instead of once per group. The same values, in the
-/// same order, as two [`update_group`] calls.
+/// same order, as two [`update_group`] calls. `listed`: the Gaussians the moments belong to
+/// (None: every one).
 pub(super) fn update_sh_groups(
     params: &mut [f32],
     grads: &[f32],
     (dc, rest): (&mut Moments, &mut Moments),
     k3: usize,
-    u_dc: Update,
-    u_rest: Update,
+    (u_dc, u_rest): (Update, Update),
+    listed: Option<&[u32]>,
 ) -> [FiniteCheck; 2] {
     let chunk = GAUSSIANS_PER_TASK;
     let r = k3 - 3;
+    let dc = (dc.m.as_mut_slice(), dc.v.as_mut_slice());
+    let rest = (rest.m.as_mut_slice(), rest.v.as_mut_slice());
+    if let Some(list) = listed {
+        return listed_sh(params, grads, 0, list, dc, rest, k3, (&u_dc, &u_rest));
+    }
     params
         .par_chunks_mut(k3 * chunk)
         .zip(grads.par_chunks(k3 * chunk))
         .zip(
-            dc.m.par_chunks_mut(3 * chunk)
-                .zip(dc.v.par_chunks_mut(3 * chunk)),
+            dc.0.par_chunks_mut(3 * chunk)
+                .zip(dc.1.par_chunks_mut(3 * chunk)),
         )
         .zip(
-            rest.m
+            rest.0
                 .par_chunks_mut(r * chunk)
-                .zip(rest.v.par_chunks_mut(r * chunk)),
+                .zip(rest.1.par_chunks_mut(r * chunk)),
         )
         .enumerate()
         .map(|(t, (((p, g), dc), rest))| {
-            update_sh_chunk(p, g, dc, rest, t * chunk, k3, &u_dc, &u_rest)
+            update_sh_chunk(p, g, dc, rest, t * chunk, Slots::Every, k3, &u_dc, &u_rest)
         })
         .reduce(
             || [FiniteCheck::default(); 2],
@@ -299,19 +368,97 @@ pub(super) fn update_sh_groups(
         )
 }
 
-/// Updates one group stored with `stride` values per Gaussian of which `offset..offset+len`
-/// belong to the group (`len == m.per_gaussian`); `grads` has the parameters' layout.
+/// [`update_sh_groups`] of the listed Gaussians `list` (records from Gaussian `base` on): halves
+/// of the list in parallel down to a task's worth. The list ascends, so each half's records are
+/// a slice of their own.
+#[allow(clippy::too_many_arguments)]
+fn listed_sh(
+    p: &mut [f32],
+    g: &[f32],
+    base: usize,
+    list: &[u32],
+    dc: (&mut [f32], &mut [f32]),
+    rest: (&mut [f32], &mut [f32]),
+    k3: usize,
+    u: (&Update, &Update),
+) -> [FiniteCheck; 2] {
+    if list.len() <= GAUSSIANS_PER_TASK {
+        return update_sh_chunk(p, g, dc, rest, base, Slots::Listed(list), k3, u.0, u.1);
+    }
+    let mid = list.len() / 2;
+    let split = list[mid] as usize;
+    let (p_left, p_right) = p.split_at_mut((split - base) * k3);
+    let (g_left, g_right) = g.split_at((split - base) * k3);
+    let (dc_left, dc_right) = split_moments(dc, mid * 3);
+    let (rest_left, rest_right) = split_moments(rest, mid * (k3 - 3));
+    let (left, right) = rayon::join(
+        || {
+            listed_sh(
+                p_left,
+                g_left,
+                base,
+                &list[..mid],
+                dc_left,
+                rest_left,
+                k3,
+                u,
+            )
+        },
+        || {
+            listed_sh(
+                p_right,
+                g_right,
+                split,
+                &list[mid..],
+                dc_right,
+                rest_right,
+                k3,
+                u,
+            )
+        },
+    );
+    [left[0].merge(right[0]), left[1].merge(right[1])]
+}
+
+type MomentSlices<'a> = (&'a mut [f32], &'a mut [f32]);
+
+/// First and second moments split at value `at`.
+fn split_moments((m, v): MomentSlices<'_>, at: usize) -> (MomentSlices<'_>, MomentSlices<'_>) {
+    let (m_left, m_right) = m.split_at_mut(at);
+    let (v_left, v_right) = v.split_at_mut(at);
+    ((m_left, v_left), (m_right, v_right))
+}
+
+/// Where one group's values sit in its parameter array: `stride` values per Gaussian, of which
+/// `offset..offset + len` are the group's (`len == Moments::per_gaussian`).
+#[derive(Clone, Copy)]
+pub(super) struct GroupLayout {
+    pub stride: usize,
+    pub offset: usize,
+    pub len: usize,
+}
+
+/// Updates one group laid out in `params` as `layout` says; `grads` has the parameters' layout.
+/// `listed`: the Gaussians the moments belong to (None: every one).
 pub(super) fn update_group(
     params: &mut [f32],
     grads: &[f32],
     mom: &mut Moments,
-    stride: usize,
-    offset: usize,
+    layout: GroupLayout,
     u: Update,
+    listed: Option<&[u32]>,
 ) -> FiniteCheck {
-    let len = mom.per_gaussian;
+    let GroupLayout {
+        stride,
+        offset,
+        len,
+    } = layout;
     if len == 0 || params.is_empty() {
         return FiniteCheck::default();
+    }
+    if let Some(list) = listed {
+        let moments = (mom.m.as_mut_slice(), mom.v.as_mut_slice());
+        return listed_group(params, grads, 0, list, moments, layout, &u);
     }
     let chunk = GAUSSIANS_PER_TASK;
     params
@@ -323,6 +470,50 @@ pub(super) fn update_group(
                 .zip(mom.v.par_chunks_mut(len * chunk)),
         )
         .enumerate()
-        .map(|(t, ((p, g), (m, v)))| update_chunk(p, g, m, v, t * chunk, stride, offset, len, &u))
+        .map(|(t, ((p, g), (m, v)))| {
+            update_chunk(p, g, m, v, t * chunk, Slots::Every, stride, offset, len, &u)
+        })
         .reduce(FiniteCheck::default, FiniteCheck::merge)
+}
+
+/// [`update_group`] of the listed Gaussians `list` (parameters from Gaussian `base` on): halves
+/// of the list in parallel down to a task's worth, as [`listed_sh`].
+fn listed_group(
+    p: &mut [f32],
+    g: &[f32],
+    base: usize,
+    list: &[u32],
+    (m, v): MomentSlices<'_>,
+    layout: GroupLayout,
+    u: &Update,
+) -> FiniteCheck {
+    let GroupLayout {
+        stride,
+        offset,
+        len,
+    } = layout;
+    if list.len() <= GAUSSIANS_PER_TASK {
+        return update_chunk(
+            p,
+            g,
+            m,
+            v,
+            base,
+            Slots::Listed(list),
+            stride,
+            offset,
+            len,
+            u,
+        );
+    }
+    let mid = list.len() / 2;
+    let split = list[mid] as usize;
+    let (p_left, p_right) = p.split_at_mut((split - base) * stride);
+    let (g_left, g_right) = g.split_at((split - base) * stride);
+    let (left, right) = split_moments((m, v), mid * len);
+    let (left, right) = rayon::join(
+        || listed_group(p_left, g_left, base, &list[..mid], left, layout, u),
+        || listed_group(p_right, g_right, split, &list[mid..], right, layout, u),
+    );
+    left.merge(right)
 }

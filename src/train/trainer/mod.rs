@@ -211,7 +211,14 @@ impl Trainer {
         let densifier = spec
             .densify_config()
             .map(|config| Densifier::new(config, splats.len()));
-        let mut adam = Adam::new(&splats);
+        let resident = resident::can_be_resident(&spec, &mut backend).then(resident::Resident::new);
+        // Moments for the trainable Gaussians only: a focused run's frozen rest (a block's
+        // context, the untouched twin of a refinement) would keep zeros there. The GPU-resident
+        // step's Adam holds them for every Gaussian.
+        let mut adam = match resident {
+            Some(_) => Adam::new(&splats),
+            None => Adam::for_trainable(&splats),
+        };
         if let Some(rates) = &spec.geometry_rate {
             for group in [
                 ParamGroup::Means,
@@ -256,7 +263,6 @@ impl Trainer {
             densifier: densifier.clone(),
         };
         let rng = fastrand::Rng::with_seed(spec.seed);
-        let resident = resident::can_be_resident(&spec, &mut backend).then(resident::Resident::new);
         let mut trainer = Trainer {
             frozen_cache: frozen_cache::FrozenCache::default(),
             resident,
@@ -563,6 +569,14 @@ impl Trainer {
             views,
             &settings,
         )
+    }
+
+    /// Keeps Adam's moments for every Gaussian, frozen ones included, as runs did before
+    /// `Adam::for_trainable`: the same model, for comparisons.
+    #[doc(hidden)]
+    pub fn keep_moments_for_every_gaussian(&mut self) {
+        self.adam = self.adam.with_every_gaussian();
+        self.checkpoint.adam = self.checkpoint.adam.with_every_gaussian();
     }
 
     /// Test hook: corrupts one Gaussian's base colour. Projection culls it from then on, and the
