@@ -18,12 +18,12 @@ use crate::blocks::merge::append_where;
 use crate::blocks::plan::Plan;
 use crate::blocks::region::{block_pixels, inside_block};
 use crate::damage::Palette;
-use crate::damage::setup::{RunConfig, apply_mode, effective_mode, model_and_spec};
+use crate::damage::setup::{RunConfig, apply_mode, effective_mode, model_and_spec, run_spec};
 use crate::scene::run_folder::RunFolder;
 use crate::scene::{Dataset, SceneError};
 use crate::splats::Splats;
 use crate::train::focus::hulls::HullConfig;
-use crate::train::focus::{Focus, ViewLights, crop_to_hulls};
+use crate::train::focus::{Focus, ViewLights, continue_trained, crop_to_hulls};
 use crate::train::job::{JobContext, JobError};
 use crate::train::run::{TrainSetup, run_training};
 use crate::train::spec::TrainView;
@@ -150,11 +150,15 @@ pub fn train_block(
     // Its Gaussians, every one trainable: with a context, the context's inside the enlarged box,
     // a trained start (docs/CLUSTER.md, "Blocks start from the context"); without, the initial
     // model cut to the box.
-    let (mut splats, mut spec) = model_and_spec(dataset, &views, &config, mode)?;
-    if let Some(context) = &context {
-        splats = context.clone();
-        continue_trained(&mut spec);
-    }
+    let (mut splats, mut spec) = match &context {
+        // The initial model is not loaded: the context's Gaussians replace it.
+        Some(context) => {
+            let mut spec = run_spec(&config, mode);
+            continue_trained(&mut spec);
+            (context.clone(), spec)
+        }
+        None => model_and_spec(dataset, &views, &config, mode)?,
+    };
     let keep: Vec<bool> = splats
         .means
         .iter()
@@ -307,18 +311,6 @@ pub(crate) fn load_photos(
     let palette = Palette::default();
     let targets = move |views: &mut [TrainView]| apply_mode(views, mode, &palette);
     Ok(focus.load(indices, mode.uses_masks(), &targets)?)
-}
-
-/// Sets `spec` to continue a trained start rather than begin from points: every SH band from the
-/// first step, and no opacity reset. A reset blanks the start, and each block then paid 100–150
-/// steps to recover it out of its share of the steps: on the small bridge at 1,200 steps, the
-/// merged twin's held-out PSNR was 24.84 dB with resets from the initial points, 25.19 without
-/// them, and 25.47 from the context (the whole run: 25.89; docs/CLUSTER.md).
-fn continue_trained(spec: &mut crate::train::spec::TrainSpec) {
-    spec.sh_ramp_every = 0;
-    if let crate::train::spec::DensifyPolicy::Adaptive(densify) = &mut spec.densify {
-        densify.opacity_reset_every = 0;
-    }
 }
 
 /// Appends to `splats` (block `k`'s own Gaussians, all trainable) the `context`'s Gaussians

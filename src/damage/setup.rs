@@ -304,18 +304,28 @@ pub fn model_and_spec(
     config: &RunConfig,
     mode: TrainMode,
 ) -> Result<(Splats, TrainSpec), JobError> {
-    let label_channels = if mode == TrainMode::Label {
-        DamageClass::ALL.len()
-    } else {
-        0
-    };
     let init = InitialModel {
         sh_degree: config.sh_degree,
-        label_channels,
+        label_channels: label_channels(mode),
         random_points: config.random_points,
         seed: config.seed,
     };
     let splats = initial_splats(dataset, views, &init)?;
+    Ok((splats, run_spec(config, mode)))
+}
+
+/// Damage label channels a model trained in `mode` carries.
+fn label_channels(mode: TrainMode) -> usize {
+    if mode == TrainMode::Label {
+        DamageClass::ALL.len()
+    } else {
+        0
+    }
+}
+
+/// The spec of a run of `config` in `mode` (`model_and_spec`'s, for a run that starts from a
+/// model of its own rather than the initial one).
+pub fn run_spec(config: &RunConfig, mode: TrainMode) -> TrainSpec {
     let mut spec = TrainSpec::reconstruction(config.iterations.max(1));
     spec.sh_degree = config.sh_degree;
     spec.seed = config.seed;
@@ -323,7 +333,7 @@ pub fn model_and_spec(
     spec.eval_every = config.eval_every;
     spec.appearance = config.appearance;
     spec.backend = config.backend;
-    spec.targets.label_weight = if label_channels > 0 {
+    spec.targets.label_weight = if label_channels(mode) > 0 {
         config.label_weight
     } else {
         0.0
@@ -338,7 +348,7 @@ pub fn model_and_spec(
     if let Some(budget) = config.budget {
         spec.densify = DensifyPolicy::Adaptive(densify_for_budget(spec.iterations, budget, 0));
     }
-    Ok((splats, spec))
+    spec
 }
 
 /// `Targets::label_geometry_steps` for the fraction `until` of a run of `iterations` steps.

@@ -15,7 +15,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
 
-pub use gaussians::{Strategy, focused_spec, trained_or_created};
+pub use gaussians::{Strategy, continue_trained, focused_spec, trained_or_created};
 use hulls::{Hull, HullConfig, union_mask, view_hulls};
 
 use crate::raster::RenderSettings;
