@@ -448,11 +448,7 @@ pub(super) fn update_group(
     u: Update,
     listed: Option<&[u32]>,
 ) -> FiniteCheck {
-    let GroupLayout {
-        stride,
-        offset,
-        len,
-    } = layout;
+    let (stride, len) = (layout.stride, layout.len);
     if len == 0 || params.is_empty() {
         return FiniteCheck::default();
     }
@@ -471,6 +467,7 @@ pub(super) fn update_group(
         )
         .enumerate()
         .map(|(t, ((p, g), (m, v)))| {
+            let offset = layout.offset;
             update_chunk(p, g, m, v, t * chunk, Slots::Every, stride, offset, len, &u)
         })
         .reduce(FiniteCheck::default, FiniteCheck::merge)
