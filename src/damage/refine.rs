@@ -343,8 +343,7 @@ fn refine_spec(
     spec.targets.label_pos_weight = config.label_pos_weight;
     spec.targets.label_geometry_steps =
         crate::damage::setup::geometry_steps(config.label_geometry_until, iterations);
-    spec.lr = config.lr;
-    spec.lr.raw_labels = config.label_lr.or(config.lr.raw_labels);
+    spec.lr = config.rates();
     spec.max_scale_growth = config.max_scale_growth;
     spec.backend = config.backend;
     spec.stop_when_flat = config.stop_when_flat;
