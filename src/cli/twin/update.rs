@@ -22,7 +22,7 @@ pub struct Args {
     // `--scale`: the resolution the update trains at.
     #[command(flatten)]
     pub scale: ProjectScaleArgs,
-    /// Training steps (default: 200, or 12 a training view for a survey of more than 16 views;
+    /// Training steps (default: 200, or 8 a training view for a survey of more than 25 views;
     /// `timeline::update::update_iterations`).
     #[arg(long)]
     pub iters: Option<u32>,
