@@ -41,7 +41,8 @@ pub fn update_learning_rates() -> LrOverrides {
     }
 }
 
-/// Steps of an update by default (CLI and viewer). At the update's rates (`update_rates`), 200
+/// Steps of an update by default for a survey of up to 25 training views (`update_iterations`;
+/// the viewer's step field starts here whatever the survey). At the update's rates (`update_rates`), 200
 /// steps on the demo (480×270) lift survey 2's held-out crack IoU by +0.162 (0.458 → 0.620),
 /// what 600 steps at the from-scratch schedule lifted (+0.167), in half the CPU time and with
 /// survey 1's look 0.14 dB above theirs. More steps at these rates fit survey 2 harder: 300 gain
