@@ -113,6 +113,7 @@ fn detection_and_update_keep_the_history() {
         appearance: true,
         seeds: Some(SeedConfig::default()),
         clear_near_floaters: true,
+        iterations_by_views: false,
     };
     let outcome = update_job(
         twin.clone(),

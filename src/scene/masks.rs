@@ -116,26 +116,50 @@ pub fn default_palette() -> BTreeMap<DamageClass, [u8; 3]> {
 /// fully transparent pixel is background, so RGBA masks drawn on a transparent layer work.
 /// 0/1-valued 8-bit masks are also accepted: when the maximum is 1 the threshold is 0.
 pub fn read_binary_mask(path: &Path) -> Result<Mask, SceneError> {
-    let img = decode(path)?;
+    Ok(binary_mask(&decode(path)?))
+}
+
+/// `read_binary_mask` on a decoded image. An 8-bit grey mask (what `save_mask_png` writes and
+/// what the demo's masks are) is read from its bytes, widened as the `image` crate widens u8 to
+/// u16 (`v · 257`, opaque): its own `to_rgba16` takes a grey image through 32-bit float RGB and
+/// cost a dense survey's update about a fifth of its CPU, reading every view's masks in each
+/// phase (docs/TIMELINE.md). Every other layout goes through `to_rgba16`.
+fn binary_mask(img: &image::DynamicImage) -> Mask {
     let (width, height) = (img.width(), img.height());
-    let rgba = img.to_rgba16();
-    let raw = rgba.as_raw();
-    let max = raw
-        .chunks_exact(4)
+    let data = match img {
+        image::DynamicImage::ImageLuma8(grey) => {
+            let opaque_grey = |&v: &u8| {
+                let wide = u16::from(v) * 257;
+                [wide, wide, wide, u16::MAX]
+            };
+            threshold_rgba16(grey.as_raw().iter().map(opaque_grey))
+        }
+        _ => {
+            let rgba = img.to_rgba16();
+            let pixel = |p: &[u16]| [p[0], p[1], p[2], p[3]];
+            threshold_rgba16(rgba.as_raw().chunks_exact(4).map(pixel))
+        }
+    };
+    Mask {
+        width,
+        height,
+        data,
+    }
+}
+
+/// The binary mask of 16-bit RGBA pixels (`read_binary_mask`'s rule): set where opaque at all
+/// and the brightest channel is above half, or above 0 when no channel exceeds 257 (a 0/1 mask).
+fn threshold_rgba16(pixels: impl Iterator<Item = [u16; 4]> + Clone) -> Vec<u8> {
+    let max = pixels
+        .clone()
         .map(|p| p[0].max(p[1]).max(p[2]))
         .max()
         .unwrap_or(0);
     // 0/1 masks (numpy `astype(uint8)` without ×255) widen to 0/257 in 16-bit.
     let threshold = if max <= 257 { 0 } else { 32767 };
-    let data = raw
-        .chunks_exact(4)
+    pixels
         .map(|p| u8::from(p[3] > 0 && p[0].max(p[1]).max(p[2]) > threshold))
-        .collect();
-    Ok(Mask {
-        width,
-        height,
-        data,
-    })
+        .collect()
 }
 
 /// Decodes a colour-coded mask: each pixel goes to the palette colour nearest to it when within
@@ -341,6 +365,26 @@ pub fn resize_mask_nearest(mask: &Mask, width: u32, height: u32) -> Mask {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The grey fast path against `to_rgba16`'s (the plain path): every grey level, in a 0..255
+    /// mask and in a 0/1 mask.
+    #[test]
+    fn grey_masks_read_as_the_plain_path_reads_them() {
+        let plain = |img: &image::DynamicImage| {
+            let rgba = image::DynamicImage::ImageRgba16(img.to_rgba16());
+            binary_mask(&rgba)
+        };
+        let levels: Vec<u8> = (0..=255).collect();
+        let grey = image::GrayImage::from_raw(16, 16, levels).expect("16×16 levels");
+        let grey = image::DynamicImage::ImageLuma8(grey);
+        let fast = binary_mask(&grey);
+        assert_eq!(fast, plain(&grey));
+        assert_eq!(fast.data.iter().filter(|&&v| v != 0).count(), 128);
+        let ones = image::GrayImage::from_raw(2, 2, vec![0, 1, 1, 0]).expect("2×2");
+        let ones = image::DynamicImage::ImageLuma8(ones);
+        assert_eq!(binary_mask(&ones), plain(&ones));
+        assert_eq!(binary_mask(&ones).data, vec![0, 1, 1, 0]);
+    }
 
     #[test]
     fn downscaled_masks_keep_thin_lines_connected() {

@@ -22,8 +22,11 @@ use crate::timeline::changes::near_floaters;
 use crate::timeline::seed::{SeedConfig, SeedReport, seed_new_damage};
 use crate::timeline::twin::{HISTORY_FILE, TimelineError, Twin};
 use crate::timeline::update_rates::{
-    UPDATE_LABEL_RATE, UPDATE_LABEL_WEIGHT, update_learning_rates,
+    UPDATE_LABEL_RATE, UPDATE_LABEL_WEIGHT, update_iterations, update_learning_rates,
 };
+// The update's steps are part of its schedule (`update_rates`); named here too, where the CLI
+// and the viewer look for them.
+pub use crate::timeline::update_rates::{UPDATE_ITERATIONS, UPDATE_STEPS_PER_VIEW};
 use crate::train::focus::{ViewLights, trained_or_created};
 use crate::train::history::{EvalSample, History};
 use crate::train::job::{Job, JobContext, JobError, JobOptions};
@@ -40,15 +43,11 @@ pub struct UpdateConfig {
     /// Clear the earlier twin's near floaters of the new survey's training cameras before
     /// training (`clear_near_floaters`; off: they stay, frozen, in front of those cameras).
     pub clear_near_floaters: bool,
+    /// Train `update_iterations(training views)` steps instead of `refine.iterations` (the
+    /// default when no step count is asked for: the survey's views are known only once it is
+    /// opened).
+    pub iterations_by_views: bool,
 }
-
-/// Steps of an update by default (CLI and viewer). At the update's rates (`update_rates`), 200
-/// steps on the demo (480×270) lift survey 2's held-out crack IoU by +0.162 (0.458 → 0.620),
-/// what 600 steps at the from-scratch schedule lifted (+0.167), in half the CPU time and with
-/// survey 1's look 0.14 dB above theirs. More steps at these rates fit survey 2 harder: 300 gain
-/// 0.006 crack IoU for 0.13 dB of survey 1's look, 600 lose both (0.616, −0.80 dB)
-/// (docs/TIMELINE.md, "The ≤ 5 % bar").
-pub const UPDATE_ITERATIONS: u32 = 200;
 
 /// The neighbours of damage move at a tenth of the from-scratch geometry rates in an update
 /// (`RefineConfig::neighbour_geometry_rate`): at full rates they grow into streaks that fit the
@@ -67,12 +66,13 @@ pub use crate::train::spec::gentle_learning_rates;
 
 impl UpdateConfig {
     /// The update as the project sets it up: its class colours, background and held-out views,
-    /// with `strategy` at `scale` for `iterations` steps (the CLI's and the viewer's defaults).
+    /// with `strategy` at `scale` for `iterations` steps (None: `update_iterations` of the
+    /// survey's training views) (the CLI's and the viewer's defaults).
     pub fn for_project(
         twin: &Twin,
         strategy: crate::damage::refine::Strategy,
         scale: crate::scene::ImageScale,
-        iterations: u32,
+        iterations: Option<u32>,
         appearance: bool,
     ) -> UpdateConfig {
         let palette = crate::damage::Palette {
@@ -87,7 +87,7 @@ impl UpdateConfig {
                 },
                 strategy,
                 scale,
-                iterations,
+                iterations: iterations.unwrap_or(UPDATE_ITERATIONS),
                 holdout: crate::train::views::Holdout::Auto { every },
                 background: glam::Vec3::from_array(twin.project.settings.background),
                 max_scale_growth: Some(UPDATE_MAX_SCALE_GROWTH),
@@ -100,6 +100,16 @@ impl UpdateConfig {
             appearance,
             seeds: Some(SeedConfig::default()),
             clear_near_floaters: true,
+            iterations_by_views: iterations.is_none(),
+        }
+    }
+
+    /// The steps this update trains on a survey with `train_views` training views.
+    pub fn iterations_for(&self, train_views: usize) -> u32 {
+        if self.iterations_by_views {
+            update_iterations(train_views)
+        } else {
+            self.refine.iterations
         }
     }
 }
@@ -314,6 +324,7 @@ pub fn update(
     refine_config.select.lift_unlabelled = true;
     let (train_idx, _) =
         split_views(&dataset, &refine_config.holdout).map_err(JobError::Invalid)?;
+    refine_config.iterations = config.iterations_for(train_idx.len());
     times.record(&t, |p| &mut p.load);
 
     // The twin as the update trains it: without its near floaters and with its new-damage

@@ -1,5 +1,5 @@
-//! The learning rates of a survey update (`timeline::update`): from-scratch rates fitted to a
-//! run of a few hundred steps that continues a trained twin. Measured on the demo building
+//! The schedule of a survey update (`timeline::update`): its steps, and from-scratch rates
+//! fitted to a run of a few hundred steps that continues a trained twin. Measured on the demo building
 //! (docs/TIMELINE.md, "Rates fitted to a short update"): with the from-scratch schedule an
 //! update needed about 500 steps to lift survey 2's held-out crack IoU by the issue's +0.159;
 //! with these, 200 lift it by +0.162 and 100 by +0.136 (from-scratch schedule: +0.068).
@@ -41,6 +41,33 @@ pub fn update_learning_rates() -> LrOverrides {
     }
 }
 
+/// Steps of an update by default for a survey of up to 25 training views (`update_iterations`;
+/// the viewer's step field starts here whatever the survey). At the update's rates (`update_rates`), 200
+/// steps on the demo (480×270) lift survey 2's held-out crack IoU by +0.162 (0.458 → 0.620),
+/// what 600 steps at the from-scratch schedule lifted (+0.167), in half the CPU time and with
+/// survey 1's look 0.14 dB above theirs. More steps at these rates fit survey 2 harder: 300 gain
+/// 0.006 crack IoU for 0.13 dB of survey 1's look, 600 lose both (0.616, −0.80 dB)
+/// (docs/TIMELINE.md, "The ≤ 5 % bar").
+pub const UPDATE_ITERATIONS: u32 = 200;
+
+/// Steps per training view of a densely flown survey's update by default (`update_iterations`).
+pub const UPDATE_STEPS_PER_VIEW: u32 = 8;
+
+/// The update's steps by default for a survey with `train_views` training views: at least
+/// `UPDATE_ITERATIONS`, and `UPDATE_STEPS_PER_VIEW` a view for a survey of more than 25. A step
+/// trains one view's crops, so 200 steps give a dense survey's views too few visits each. With
+/// survey 2 of the demo flown as densely as survey 1 (52 training views, 480×270), 416 steps
+/// (8 a view) reach held-out crack / rebar / spalling IoU 0.683 / 0.650 / 0.889 against 0.663 /
+/// 0.600 / 0.879 at 200, survey 1's look kept (+0.01 dB). More steps do not lift the cracks
+/// further: held-out crack IoU wanders between 0.65 and 0.70 from 400 to 624 steps while survey 1's
+/// look falls (−0.31 dB at 624; docs/TIMELINE.md, "Steps for a dense survey"). Surveys of ten
+/// views keep their 200 steps, past which survey 1's look drops.
+pub fn update_iterations(train_views: usize) -> u32 {
+    let by_views = u32::try_from(train_views)
+        .unwrap_or(u32::MAX)
+        .saturating_mul(UPDATE_STEPS_PER_VIEW);
+    UPDATE_ITERATIONS.max(by_views)
+}
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -75,6 +102,37 @@ mod tests {
                 "step {step}: {position}"
             );
         }
+    }
+
+    #[test]
+    fn a_dense_survey_gets_steps_by_its_views_and_a_sparse_one_keeps_the_default() {
+        // The survey 2 (10 training views) and any survey up to 25 views: 200 steps.
+        for views in [0, 1, 10, 25] {
+            assert_eq!(update_iterations(views), UPDATE_ITERATIONS, "{views} views");
+        }
+        // Survey 2 flown densely (52 training views): 8 steps a view, 416.
+        assert_eq!(update_iterations(52), 416);
+        assert!(update_iterations(52) > UPDATE_ITERATIONS);
+        assert_eq!(update_iterations(usize::MAX), u32::MAX);
+    }
+
+    #[test]
+    fn an_update_asked_for_no_steps_trains_by_its_views_and_one_asked_for_steps_trains_them() {
+        use crate::timeline::update::UpdateConfig;
+        let mut config = UpdateConfig {
+            refine: crate::damage::refine::RefineConfig {
+                iterations: 123,
+                ..Default::default()
+            },
+            appearance: true,
+            seeds: None,
+            clear_near_floaters: true,
+            iterations_by_views: false,
+        };
+        assert_eq!(config.iterations_for(52), 123);
+        config.iterations_by_views = true;
+        assert_eq!(config.iterations_for(52), update_iterations(52));
+        assert_eq!(config.iterations_for(10), UPDATE_ITERATIONS);
     }
 
     #[test]

@@ -372,7 +372,7 @@ impl AppState {
             &timeline.twin,
             strategy,
             timeline.twin.project.settings.scale,
-            iterations,
+            Some(iterations),
             true,
         );
         // A hardware GPU when there is one, as live training.

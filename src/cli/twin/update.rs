@@ -22,8 +22,10 @@ pub struct Args {
     // `--scale`: the resolution the update trains at.
     #[command(flatten)]
     pub scale: ProjectScaleArgs,
-    #[arg(long, default_value_t = damage_twin::timeline::update::UPDATE_ITERATIONS)]
-    pub iters: u32,
+    /// Training steps (default: 200, or 8 a training view for a survey of more than 25 views;
+    /// `timeline::update::update_iterations`).
+    #[arg(long)]
+    pub iters: Option<u32>,
     /// Train on the photos as they are (no per-photo light compensation).
     #[arg(long)]
     pub no_appearance: bool,
