@@ -68,6 +68,7 @@ pub fn update_iterations(train_views: usize) -> u32 {
         .saturating_mul(UPDATE_STEPS_PER_VIEW);
     UPDATE_ITERATIONS.max(by_views)
 }
+
 #[cfg(test)]
 mod tests {
     use super::*;
