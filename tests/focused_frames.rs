@@ -293,29 +293,52 @@ fn views(target: &Splats) -> Vec<TrainView> {
         .collect()
 }
 
-#[test]
-fn a_focused_run_trains_the_same_with_and_without_the_frozen_cache() {
+/// A focused run's target, its start (the target with every fourth Gaussian from `first`
+/// nudged by `seed`) and the trainable mask (those Gaussians).
+fn focused_start(first: usize, seed: u64) -> (Splats, Splats, Vec<bool>) {
     let target = labelled_model(2000, 21, LABELS);
     let mut start = target.clone();
-    let trainable: Vec<bool> = (0..start.len()).map(|g| g % 4 == 0).collect();
+    let trainable: Vec<bool> = (0..start.len()).map(|g| g % 4 == first).collect();
     let ids: Vec<u32> = (0..start.len() as u32)
         .filter(|&g| trainable[g as usize])
         .collect();
-    nudge(&mut start, &ids, 9);
-    let mut spec = TrainSpec::reconstruction(24);
+    nudge(&mut start, &ids, seed);
+    (target, start, trainable)
+}
+
+/// The spec of a focused run of `iterations` steps on `trainable`, with the labels in the loss.
+fn focused_test_spec(iterations: u32, trainable: Vec<bool>) -> TrainSpec {
+    let mut spec = TrainSpec::reconstruction(iterations);
     spec.trainable = Some(trainable);
     spec.sh_ramp_every = 0;
     spec.eval_every = 0;
     spec.targets.label_weight = 0.5;
+    spec
+}
+
+/// Steps `a` and `b` to the end side by side: every loss the same bits, nothing rolled back.
+fn train_side_by_side(a: &mut Trainer, b: &mut Trainer, what: &str) {
+    while !a.is_done() {
+        let (x, y) = (a.step(), b.step());
+        assert_eq!(
+            x.loss.to_bits(),
+            y.loss.to_bits(),
+            "{what}: step {}",
+            x.step
+        );
+        assert!(x.rolled_back.is_none());
+    }
+}
+
+#[test]
+fn a_focused_run_trains_the_same_with_and_without_the_frozen_cache() {
+    let (target, start, trainable) = focused_start(0, 9);
+    let spec = focused_test_spec(24, trainable);
     let views = views(&target);
     let mut cached = Trainer::new(spec.clone(), start.clone(), views.clone()).unwrap();
     let mut whole = Trainer::new(spec, start.clone(), views).unwrap();
     whole.set_frozen_cache(false);
-    while !cached.is_done() {
-        let (a, b) = (cached.step(), whole.step());
-        assert_eq!(a.loss.to_bits(), b.loss.to_bits(), "step {}", a.step);
-        assert!(a.rolled_back.is_none());
-    }
+    train_side_by_side(&mut cached, &mut whole, "frozen cache");
     let (a, b) = (cached.splats(), whole.splats());
     assert_ne!(a.means, start.means, "training moved something");
     assert_eq!(a, b, "the models differ");
@@ -326,13 +349,7 @@ fn a_focused_run_trains_the_same_with_and_without_the_frozen_cache() {
 /// with density control (children appended, prunes, an opacity reset) in the run.
 #[test]
 fn a_focused_run_trains_the_same_with_moments_for_the_trainable_only() {
-    let target = labelled_model(2000, 21, LABELS);
-    let mut start = target.clone();
-    let trainable: Vec<bool> = (0..start.len()).map(|g| g % 4 == 1).collect();
-    let ids: Vec<u32> = (0..start.len() as u32)
-        .filter(|&g| trainable[g as usize])
-        .collect();
-    nudge(&mut start, &ids, 10);
+    let (target, start, trainable) = focused_start(1, 10);
     let views = views(&target);
     let densify = DensifyConfig {
         start: 4,
@@ -344,25 +361,12 @@ fn a_focused_run_trains_the_same_with_moments_for_the_trainable_only() {
         ..DensifyConfig::default()
     };
     for policy in [DensifyPolicy::Off, DensifyPolicy::Adaptive(densify)] {
-        let mut spec = TrainSpec::reconstruction(32);
-        spec.trainable = Some(trainable.clone());
-        spec.sh_ramp_every = 0;
-        spec.eval_every = 0;
-        spec.targets.label_weight = 0.5;
+        let mut spec = focused_test_spec(32, trainable.clone());
         spec.densify = policy.clone();
         let mut listed = Trainer::new(spec.clone(), start.clone(), views.clone()).unwrap();
         let mut every = Trainer::new(spec, start.clone(), views.clone()).unwrap();
         every.keep_moments_for_every_gaussian();
-        while !listed.is_done() {
-            let (a, b) = (listed.step(), every.step());
-            assert_eq!(
-                a.loss.to_bits(),
-                b.loss.to_bits(),
-                "{policy:?}: step {}",
-                a.step
-            );
-            assert!(a.rolled_back.is_none());
-        }
+        train_side_by_side(&mut listed, &mut every, &format!("{policy:?}"));
         let (a, b) = (listed.splats(), every.splats());
         assert_ne!(a.means, start.means, "training moved something");
         if let DensifyPolicy::Adaptive(_) = policy {
