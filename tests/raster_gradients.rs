@@ -40,6 +40,7 @@ fn settings() -> RenderSettings {
         alpha_max: 0.99,
         alpha_threshold: 0.0,
         sh_direction_grad: true,
+        ..RenderSettings::default()
     }
 }
 

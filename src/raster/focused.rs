@@ -230,7 +230,7 @@ impl Rasterizer {
             self.keep_frozen(view, key);
             return Some(());
         }
-        let frame = CameraFrame::new(camera);
+        let frame = CameraFrame::new(camera, settings);
         let labels = splats.label_channels;
         let n = splats.len();
         let t0 = Instant::now();

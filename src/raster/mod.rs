@@ -32,12 +32,14 @@ use crate::splats::Splats;
 pub use backend::RasterBackend;
 pub use bin::{tile_grid, tile_rect};
 pub use focused::FrameFocus;
+pub use project::camera_depths;
 
 /// Tile edge in pixels (gsplat, 3DGS).
 pub const TILE_SIZE: u32 = 16;
 /// Pixels per tile.
 pub(crate) const TILE_PIXELS: usize = (TILE_SIZE * TILE_SIZE) as usize;
-/// Near plane: Gaussians whose camera-space depth is not above it are culled (gsplat's default).
+/// Near plane: Gaussians whose camera-space depth is not above it are culled (gsplat's default
+/// of [`RenderSettings::near_plane`]).
 pub const NEAR_PLANE: f32 = 0.01;
 /// Far plane (gsplat's default 1e10).
 pub const FAR_PLANE: f32 = 1e10;
@@ -66,6 +68,12 @@ pub struct RenderSettings {
     /// Whether the backward propagates colour gradients through the SH view direction into the
     /// means (the exact gradient). gsplat detaches that path; its reference tests turn this off.
     pub sh_direction_grad: bool,
+    /// Gaussians whose camera-space depth is not above this are culled ([`NEAR_PLANE`] by
+    /// default). A later survey's renders of the twin raise it to the view's floater clearance
+    /// (`timeline::changes::leaving_out_near_floaters`): that culls exactly the near floaters,
+    /// bit for bit the render of the twin without them, and copies nothing. The GPU renderer
+    /// keeps [`NEAR_PLANE`].
+    pub near_plane: f32,
 }
 
 impl Default for RenderSettings {
@@ -76,6 +84,7 @@ impl Default for RenderSettings {
             alpha_max: 0.99,
             alpha_threshold: ALPHA_THRESHOLD,
             sh_direction_grad: true,
+            near_plane: NEAR_PLANE,
         }
     }
 }
@@ -224,10 +233,12 @@ pub(crate) struct CameraFrame {
     pub lim_x_neg: f32,
     pub lim_y_pos: f32,
     pub lim_y_neg: f32,
+    /// `RenderSettings::near_plane` of the frame.
+    pub near_plane: f32,
 }
 
 impl CameraFrame {
-    pub fn new(camera: &Camera) -> Self {
+    pub fn new(camera: &Camera, settings: &RenderSettings) -> Self {
         let k = &camera.intrinsics;
         let (w, h) = (k.width as f32, k.height as f32);
         let tan_fovx = 0.5 * w / k.fx;
@@ -246,6 +257,7 @@ impl CameraFrame {
             lim_x_neg: k.cx / k.fx + 0.3 * tan_fovx,
             lim_y_pos: (h - k.cy) / k.fy + 0.3 * tan_fovy,
             lim_y_neg: k.cy / k.fy + 0.3 * tan_fovy,
+            near_plane: settings.near_plane,
         }
     }
 }
@@ -305,7 +317,7 @@ impl Rasterizer {
             labels <= MAX_LABEL_CHANNELS,
             "{labels} label channels; the rasterizer blends at most {MAX_LABEL_CHANNELS}"
         );
-        let frame = CameraFrame::new(camera);
+        let frame = CameraFrame::new(camera, settings);
         self.label_channels = labels;
         self.width = frame.width;
         self.height = frame.height;
@@ -445,7 +457,7 @@ impl Rasterizer {
         {
             grads.reset(splats);
         }
-        let frame = CameraFrame::new(camera);
+        let frame = CameraFrame::new(camera, settings);
         if self.focus.last_cached() {
             self.backward_cached(splats, &frame, settings, v_out, grads);
             return;

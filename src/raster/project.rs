@@ -10,7 +10,8 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::lanes::{F8, LANES, M8, build3, build3x3, group_of};
-use super::{COV2D_BLUR, CameraFrame, FAR_PLANE, NEAR_PLANE, Projected, RenderSettings};
+use super::{COV2D_BLUR, CameraFrame, FAR_PLANE, Projected, RenderSettings};
+use crate::scene::Camera;
 use crate::simd::simd_dispatch;
 use crate::splats::Splats;
 use crate::splats::model::sigmoid;
@@ -129,8 +130,9 @@ pub(crate) fn camera_space(x: &GaussianLanes, frame: &CameraFrame) -> CameraSpac
     let p: [F8; 3] = build3(|r| w[r][0] * mean[0] + w[r][1] * mean[1] + w[r][2] * mean[2] + t[r]);
     let [qx, qy, qz, qw] = x.rotation;
     let norm2 = qx * qx + qy * qy + qz * qz + qw * qw;
-    let valid =
-        p[2].gt(F8::splat(NEAR_PLANE)) & p[2].lt(F8::splat(FAR_PLANE)) & norm2.gt(F8::splat(0.0));
+    let valid = p[2].gt(F8::splat(frame.near_plane))
+        & p[2].lt(F8::splat(FAR_PLANE))
+        & norm2.gt(F8::splat(0.0));
     let norm = norm2.sqrt();
     let inv_norm = 1.0 / norm;
     let q = [qx * inv_norm, qy * inv_norm, qz * inv_norm, qw * inv_norm];
@@ -256,6 +258,21 @@ fn project_geometry(
         check,
         dir,
     }
+}
+
+/// Each Gaussian's camera-space depth from `camera` as the projection computes it (the
+/// operations of `camera_space`, in its order), so the bits are those the near plane culls on:
+/// a cull decided on these depths (`timeline::changes::near_floaters`) and one by
+/// `RenderSettings::near_plane` agree exactly.
+pub fn camera_depths(splats: &Splats, camera: &Camera) -> Vec<f32> {
+    let frame = CameraFrame::new(camera, &RenderSettings::default());
+    let w = world_to_camera_rows(&frame)[2];
+    let t = frame.translation[2];
+    splats
+        .means
+        .iter()
+        .map(|m| w[0] * m.x + w[1] * m.y + w[2] * m.z + t)
+        .collect()
 }
 
 /// The output slices of one chunk.

@@ -17,8 +17,7 @@ use glam::{Mat3, Vec2, Vec3, Vec4};
 
 pub use super::reference_backward::{backward, blend_backward, project_backward};
 use super::{
-    COV2D_BLUR, FAR_PLANE, NEAR_PLANE, Projected, RenderOutput, RenderSettings, TILE_SIZE,
-    TRANSMITTANCE_MIN,
+    COV2D_BLUR, FAR_PLANE, Projected, RenderOutput, RenderSettings, TILE_SIZE, TRANSMITTANCE_MIN,
 };
 use crate::scene::Camera;
 use crate::splats::Splats;
@@ -46,10 +45,12 @@ pub(crate) struct Pinhole {
     /// (the affine approximation of eq. 5 breaks down away from the optical axis).
     pub x_limit: (f32, f32),
     pub y_limit: (f32, f32),
+    /// `RenderSettings::near_plane`.
+    pub near_plane: f32,
 }
 
 impl Pinhole {
-    pub fn new(camera: &Camera) -> Pinhole {
+    pub fn new(camera: &Camera, settings: &RenderSettings) -> Pinhole {
         let k = &camera.intrinsics;
         let (w, h) = (k.width as f32, k.height as f32);
         let (tan_fov_x, tan_fov_y) = (0.5 * w / k.fx, 0.5 * h / k.fy);
@@ -71,6 +72,7 @@ impl Pinhole {
                 k.cy / k.fy + 0.3 * tan_fov_y,
                 (h - k.cy) / k.fy + 0.3 * tan_fov_y,
             ),
+            near_plane: settings.near_plane,
         }
     }
 }
@@ -131,7 +133,7 @@ pub(crate) struct CameraSpace {
 pub(crate) fn camera_space(splats: &Splats, g: usize, cam: &Pinhole) -> Option<CameraSpace> {
     let w = cam.world_to_camera;
     let p = w * splats.means[g] + cam.translation;
-    if !(p.z > NEAR_PLANE && p.z < FAR_PLANE) {
+    if !(p.z > cam.near_plane && p.z < FAR_PLANE) {
         return None;
     }
     let q = Vec4::from(splats.rotations[g]);
@@ -292,7 +294,7 @@ fn project_gaussian(
 pub fn project(splats: &Splats, camera: &Camera, settings: &RenderSettings) -> Projected {
     let n = splats.len();
     let l = splats.label_channels;
-    let cam = Pinhole::new(camera);
+    let cam = Pinhole::new(camera, settings);
     let sh_degree = settings.sh_degree.min(splats.sh_degree);
     let mut out = Projected {
         means2d: vec![Vec2::ZERO; n],

@@ -243,7 +243,7 @@ pub fn project_backward(
     projected: &Projected,
     screen: &ScreenGrads,
 ) -> SplatGrads {
-    let cam = Pinhole::new(camera);
+    let cam = Pinhole::new(camera, settings);
     let sh_degree = settings.sh_degree.min(splats.sh_degree);
     let k = splats.sh_coeffs() * 3;
     let l = splats.label_channels;

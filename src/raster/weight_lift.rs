@@ -96,7 +96,7 @@ impl WeightLift {
         gaussians: &[u32],
         weight: impl Fn(usize, usize) -> f32,
     ) -> &[f32] {
-        let frame = CameraFrame::new(camera);
+        let frame = CameraFrame::new(camera, &self.settings);
         project(&self.probe, &frame, &self.settings, &mut self.scout);
         let (width, height) = (frame.width, frame.height);
         let (tiles_x, tiles_y) = tile_grid(width, height);

@@ -21,7 +21,7 @@ use crate::raster::{RenderOutput, RenderSettings, render};
 use crate::scene::project::ColourTransform;
 use crate::scene::{Dataset, Mask};
 use crate::splats::Splats;
-use crate::timeline::changes::without_near_floaters;
+use crate::timeline::near_floaters::leaving_out_near_floaters;
 use crate::train::focus::ViewLights;
 use crate::train::job::JobError;
 // The fit itself sits beneath `damage`, whose evaluation uses it too.
@@ -77,8 +77,8 @@ pub fn fit_appearance(
     let (mut all_render, mut all_photo) = (Vec::new(), Vec::new());
     for index in 0..dataset.views.len() {
         let loaded = dataset.load_view(index, config.scale)?;
-        let seen = without_near_floaters(twin, &loaded.camera);
-        let out = render(&seen, &loaded.camera, &settings);
+        let seen = leaving_out_near_floaters(twin, &loaded.camera, &settings);
+        let out = render(twin, &loaded.camera, &seen);
         let old = predicted_masks(&out, readout);
         let observed: Vec<&Mask> = loaded.masks.values().collect();
         let masks: Vec<&Mask> = old.iter().chain(observed).collect();

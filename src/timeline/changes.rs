@@ -6,7 +6,6 @@
 //! at the same surface points (`earlier`), and a vote in 3D (candidate pixels lifted to the
 //! twin's Gaussians must agree across the views that see them).
 
-use std::borrow::Cow;
 use std::collections::BTreeMap;
 
 use serde::Serialize;
@@ -19,6 +18,7 @@ use crate::raster::{RenderSettings, render};
 use crate::scene::{Camera, Dataset, ImageScale, Mask, MaskFolder, MaskSource, SceneError};
 use crate::splats::Splats;
 use crate::timeline::earlier::{EarlierSurvey, surface_depth};
+use crate::timeline::near_floaters::leaving_out_near_floaters;
 
 /// How changes are found.
 #[derive(Clone, Debug, PartialEq)]
@@ -233,7 +233,11 @@ pub fn detect(
         let (camera, mut observed) =
             dataset.load_view_masks(index, masks.as_ref(), config.scale)?;
         let k = camera.intrinsics;
-        let out = render(&without_near_floaters(twin, &camera), &camera, &settings);
+        let out = render(
+            twin,
+            &camera,
+            &leaving_out_near_floaters(twin, &camera, &settings),
+        );
         let old = predicted_masks_at(&out, &config.readout, config.old_threshold);
         if earlier.is_some() {
             depths.push(surface_depth(&out));
@@ -338,44 +342,6 @@ pub fn detect(
         ));
     }
     Ok(Detection { views, steps })
-}
-
-/// A Gaussian whose centre is nearer a new camera than this fraction of the median depth of the
-/// Gaussians in front of it is a floater there.
-const NEAR_FLOATER_FRACTION: f32 = 0.25;
-
-/// The twin as a new pose should see it: Gaussians whose centres lie nearer the camera than a
-/// quarter of the median depth of those in front of it are left out. A later survey flies where
-/// the earlier one did not, and a floater that no earlier view constrained can sit right in
-/// front of a new camera: on the demo building one at 0.18 m covered survey 2's view 4 and hid
-/// a whole wall of old cracks, which all came out as new damage (docs/TIMELINE.md).
-pub fn without_near_floaters<'a>(twin: &'a Splats, camera: &Camera) -> Cow<'a, Splats> {
-    let floaters = near_floaters(twin, camera);
-    if !floaters.iter().any(|&f| f) {
-        return Cow::Borrowed(twin);
-    }
-    let keep: Vec<bool> = floaters.iter().map(|&f| !f).collect();
-    let mut seen = twin.clone();
-    seen.retain(&keep);
-    Cow::Owned(seen)
-}
-
-/// Per Gaussian, whether it is a floater in front of `camera` (see `without_near_floaters`).
-pub(crate) fn near_floaters(twin: &Splats, camera: &Camera) -> Vec<bool> {
-    let depths: Vec<f32> = twin
-        .means
-        .iter()
-        .map(|&m| camera.world_to_camera(m).z)
-        .collect();
-    let mut in_front: Vec<f32> = depths.iter().copied().filter(|&z| z > 0.0).collect();
-    if in_front.is_empty() {
-        return vec![false; twin.len()];
-    }
-    let middle = in_front.len() / 2;
-    let (_, median, _) = in_front.select_nth_unstable_by(middle, f32::total_cmp);
-    let clearance = NEAR_FLOATER_FRACTION * *median;
-    // Behind the camera is the renderer's to cull; in front but too near is a floater.
-    depths.iter().map(|&z| z > 0.0 && z < clearance).collect()
 }
 
 /// Keeps the candidate pixels whose Gaussians the views agree on: per class, each Gaussian's
@@ -506,45 +472,5 @@ mod tests {
             16 + 8,
             "the speck is dropped, the block stays"
         );
-    }
-
-    #[test]
-    fn a_floater_in_front_of_a_new_camera_is_left_out() {
-        let k = crate::scene::Intrinsics {
-            width: 32,
-            height: 32,
-            fx: 30.0,
-            fy: 30.0,
-            cx: 16.0,
-            cy: 16.0,
-        };
-        let camera = Camera::new(k, glam::Quat::IDENTITY, glam::Vec3::ZERO);
-        let mut twin = Splats::empty(0, 0);
-        // A wall of nine Gaussians 10 m ahead, one floater 0.2 m ahead, one behind the camera.
-        let mut push = |z: f32, x: f32, id: u64| {
-            twin.push(
-                glam::Vec3::new(x, 0.0, z),
-                glam::Vec3::splat(-1.0),
-                glam::Quat::IDENTITY,
-                2.0,
-                &[0.5; 3],
-                &[],
-                id,
-                0,
-            )
-        };
-        for i in 0..9 {
-            push(10.0, i as f32 - 4.0, i);
-        }
-        push(0.2, 0.0, 9);
-        push(-3.0, 0.0, 10);
-        let seen = without_near_floaters(&twin, &camera);
-        assert_eq!(seen.len(), 10);
-        assert!(!seen.meta.ids.contains(&9), "the floater is left out");
-        assert!(
-            seen.meta.ids.contains(&10),
-            "behind the camera is the renderer's to cull"
-        );
-        assert_eq!(twin.len(), 11, "the twin itself is untouched");
     }
 }

@@ -15,6 +15,7 @@ pub mod earlier;
 pub mod from_photos;
 pub mod georeference;
 pub mod lock;
+pub mod near_floaters;
 pub mod project_paths;
 pub mod quantities;
 pub mod record;

@@ -18,8 +18,9 @@ use crate::raster::{RenderOutput, RenderSettings, render};
 use crate::scene::{Dataset, ImageScale, Mask, SceneError};
 use crate::splats::Splats;
 use crate::splats::model::{SH_C0, logit};
-use crate::timeline::changes::{and_not, dilate, drop_slivers, drop_small, without_near_floaters};
+use crate::timeline::changes::{and_not, dilate, drop_slivers, drop_small};
 use crate::timeline::earlier::{EarlierSurvey, surface_depth, unproject};
+use crate::timeline::near_floaters::leaving_out_near_floaters;
 use crate::train::focus::ViewLights;
 
 /// How seeds are made.
@@ -113,11 +114,8 @@ pub fn seed_new_damage(
         let out = match rendered.get(&index) {
             Some(out) => out,
             None => {
-                own = render(
-                    &without_near_floaters(model, &loaded.camera),
-                    &loaded.camera,
-                    settings,
-                );
+                let seen = leaving_out_near_floaters(model, &loaded.camera, settings);
+                own = render(model, &loaded.camera, &seen);
                 &own
             }
         };

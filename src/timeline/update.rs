@@ -18,7 +18,7 @@ use crate::scene::{Dataset, Mask};
 use crate::splats::Splats;
 use crate::splats::model::{NO_SURVEY, logit, sigmoid};
 use crate::timeline::appearance::{fit_appearance, unchanged_pixels};
-use crate::timeline::changes::near_floaters;
+use crate::timeline::near_floaters::near_floaters;
 use crate::timeline::seed::{SeedConfig, SeedReport, seed_new_damage};
 use crate::timeline::twin::{HISTORY_FILE, TimelineError, Twin};
 use crate::timeline::update_rates::{

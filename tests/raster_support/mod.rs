@@ -112,6 +112,7 @@ pub fn settings() -> RenderSettings {
         alpha_max: 0.999,
         alpha_threshold: 1.0 / 255.0,
         sh_direction_grad: false,
+        near_plane: damage_twin::raster::NEAR_PLANE,
     }
 }
 

@@ -10,7 +10,8 @@ use crate::blocks::surface::{block_of, surface_along};
 use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
 use crate::scene::{Dataset, ImageScale, SceneError};
 use crate::splats::Splats;
-use crate::timeline::changes::{ViewChanges, without_near_floaters};
+use crate::timeline::changes::ViewChanges;
+use crate::timeline::near_floaters::leaving_out_near_floaters;
 
 /// Changed pixels a block needs before `twin update` retrains it, at the detection's scale: a
 /// few stray pixels of a noisy change map do not retrain a block.
@@ -82,8 +83,8 @@ pub fn changes_per_block(
         }
         let camera = dataset.view_camera(view.index, scale)?;
         // The twin as detection rendered it (floaters in front of a new pose left out).
-        let seen = without_near_floaters(model, &camera);
-        rasterizer.forward(&seen, &camera, &settings, &mut out);
+        let seen = leaving_out_near_floaters(model, &camera, &settings);
+        rasterizer.forward(model, &camera, &seen, &mut out);
         for (p, along) in surface_along(&out, &camera, plan).into_iter().enumerate() {
             let (new, gone) = (changed(&view.new, p), changed(&view.gone, p));
             if !new && !gone {
