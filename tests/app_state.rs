@@ -82,6 +82,7 @@ fn dataset_with_views(root: &std::path::Path, n: usize) -> Dataset {
         mask_counts: BTreeMap::new(),
         background: [0.0; 3],
         warnings: Vec::new(),
+        view_cache: None,
     }
 }
 

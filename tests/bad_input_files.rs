@@ -225,6 +225,7 @@ fn dataset(root: &Path, image: &Path, camera_size: (u32, u32)) -> Dataset {
         mask_counts: BTreeMap::new(),
         background: [0.0; 3],
         warnings: Vec::new(),
+        view_cache: None,
     }
 }
 

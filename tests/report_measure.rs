@@ -383,6 +383,7 @@ fn the_viewer_selects_and_frames_a_measured_region() {
         mask_counts: BTreeMap::new(),
         background: [0.0; 3],
         warnings: Vec::new(),
+        view_cache: None,
     };
     state
         .results_sender()

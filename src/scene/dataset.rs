@@ -10,6 +10,7 @@ use serde::Serialize;
 
 use crate::scene::DamageClass;
 use crate::scene::mask_source::MaskSource;
+use crate::scene::view_cache::ViewCache;
 use crate::scene::{Camera, Mask, PointCloud, RgbImage};
 
 /// Which reader recognised the dataset.
@@ -89,6 +90,9 @@ pub struct Dataset {
     pub background: [f32; 3],
     /// Problems that did not stop reading (missing files, unregistered images).
     pub warnings: Vec<String>,
+    /// Views loaded before, kept for loading again (`keep_loaded_views`); None: every load
+    /// reads the files.
+    pub view_cache: Option<Arc<ViewCache>>,
 }
 
 /// One view's pixels at a chosen scale, with its camera scaled to match.
@@ -104,6 +108,16 @@ pub struct LoadedView {
 }
 
 impl Dataset {
+    /// From now on each view is decoded and resized once per scale and kept (`ViewCache`):
+    /// `load_view`, and `load_view_masks` of the dataset's own masks, return the kept copy.
+    /// For a job that reads the same views many times (the survey update); the views stay in
+    /// memory until the last clone of this dataset is dropped. The views (`views`) must not
+    /// change while they are kept.
+    pub fn keep_loaded_views(&mut self) {
+        self.view_cache
+            .get_or_insert_with(|| Arc::new(ViewCache::new()));
+    }
+
     /// Views with an ignore mask (nerfstudio's `mask_path`, or COLMAP's
     /// `masks/<image file name>.png`).
     pub fn ignore_mask_count(&self) -> usize {

@@ -118,7 +118,7 @@ impl Mask {
 }
 
 /// The resolution at which a dataset's images are loaded (DESIGN.md: intrinsics scale with it).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub enum ImageScale {
     /// Downscale by an integer factor: 1, 2, 4 or 8 (`1` is the image as stored).
     Factor(u32),

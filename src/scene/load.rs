@@ -4,6 +4,7 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::Arc;
 
 use crate::scene::DamageClass;
 use crate::scene::atomic::write_atomic;
@@ -225,7 +226,23 @@ impl Dataset {
     /// whose size disagrees with its camera is an error naming the file — unless it is the
     /// camera's size divided by 2, 4 or 8 (a pre-downscaled copy), in which case the intrinsics
     /// are scaled to the image.
+    ///
+    /// With `keep_loaded_views` the view is read once per scale and a copy of the kept view
+    /// returned.
     pub fn load_view(&self, index: usize, scale: ImageScale) -> Result<LoadedView, SceneError> {
+        let Some(cache) = &self.view_cache else {
+            return self.read_view(index, scale);
+        };
+        if let Some(kept) = cache.view(index, scale) {
+            return Ok(kept.as_ref().clone());
+        }
+        let loaded = self.read_view(index, scale)?;
+        cache.keep_view(index, scale, Arc::new(loaded.clone()));
+        Ok(loaded)
+    }
+
+    /// `load_view` from the files.
+    fn read_view(&self, index: usize, scale: ImageScale) -> Result<LoadedView, SceneError> {
         let view = self.view(index)?;
         let mut image = load_image_with_background(&view.image_path, self.background)?;
         let stored = (image.width, image.height);
@@ -261,8 +278,38 @@ impl Dataset {
     /// another source such as a synthetic survey's clean `truth/masks/`), prepared exactly as
     /// `load_view` prepares the dataset's own: checked against the stored image size,
     /// undistorted, resized to `scale`. Reads only the image's header, not its pixels. Returns
-    /// the camera at `scale` with them.
+    /// the camera at `scale` with them. With `keep_loaded_views`, the dataset's own masks are
+    /// read once per scale (or taken from the view loaded whole at that scale).
     pub fn load_view_masks(
+        &self,
+        index: usize,
+        source: &dyn MaskSource,
+        scale: ImageScale,
+    ) -> Result<(Camera, BTreeMap<DamageClass, Mask>), SceneError> {
+        let cache = self
+            .view_cache
+            .as_ref()
+            .filter(|_| self.is_own_mask_source(source));
+        let Some(cache) = cache else {
+            return self.read_view_masks(index, source, scale);
+        };
+        if let Some(kept) = cache.masks(index, scale) {
+            return Ok(kept);
+        }
+        let read = self.read_view_masks(index, source, scale)?;
+        cache.keep_masks(index, scale, read.clone());
+        Ok(read)
+    }
+
+    /// Whether `source` is the dataset's own mask source (`masks`), the one `load_view` reads.
+    fn is_own_mask_source(&self, source: &dyn MaskSource) -> bool {
+        self.masks
+            .as_ref()
+            .is_some_and(|own| std::ptr::addr_eq(Arc::as_ptr(own), source))
+    }
+
+    /// `load_view_masks` from the files.
+    fn read_view_masks(
         &self,
         index: usize,
         source: &dyn MaskSource,
@@ -293,6 +340,9 @@ impl Dataset {
         let view = self.view(index)?;
         if !self.has_ignore_mask(view) {
             return Ok(None);
+        }
+        if let Some(kept) = self.view_cache.as_ref().and_then(|c| c.view(index, scale)) {
+            return Ok(kept.ignore.clone());
         }
         let stored = crate::scene::files::image_size(&view.image_path)?;
         let (camera, distortion) = stored_geometry(view, stored)?;

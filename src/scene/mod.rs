@@ -25,6 +25,7 @@ pub mod similarity;
 pub mod survey_name;
 pub mod transforms;
 pub mod undistort;
+pub mod view_cache;
 
 pub use camera::{Camera, Intrinsics};
 pub use damage_class::{DamageClass, NEW_DAMAGE_COLOUR};

@@ -334,6 +334,7 @@ fn open_colmap(
         mask_counts,
         background: options.background,
         warnings,
+        view_cache: None,
     })
 }
 

@@ -218,6 +218,7 @@ pub fn open_transforms(root: &Path, options: &OpenOptions) -> Result<Dataset, Sc
         mask_counts,
         background: options.background,
         warnings,
+        view_cache: None,
     })
 }
 

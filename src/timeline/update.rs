@@ -315,7 +315,11 @@ pub fn update(
         })?;
     // Damage the previous twin knows is old: first seen there at the latest.
     tag_damage(&mut model, (index - 1) as u16);
-    let dataset = twin.open_survey_dataset(name).map_err(timeline_error)?;
+    let mut dataset = twin.open_survey_dataset(name).map_err(timeline_error)?;
+    // Every phase reads the survey's views (the floaters' masks, the light fit, the seeds, the
+    // selection, the crops, the held-out scoring): each is decoded and resized once, and the
+    // kept views go when the update ends (`Dataset::keep_loaded_views`).
+    dataset.keep_loaded_views();
     let readout = DamageReadout {
         mode: config.refine.select.mode,
         ..DamageReadout::for_model(&model, config.refine.select.palette)
