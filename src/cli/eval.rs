@@ -10,6 +10,7 @@ use serde::Serialize;
 use damage_twin::damage::TrainMode;
 use damage_twin::damage::assess::{EvalRequest, ViewScore, evaluate_job};
 use damage_twin::damage::evaluate::{DamageFigures, DamageReadout, OverlaySource};
+use damage_twin::damage::view_damage::ViewDamage;
 use damage_twin::train::job::JobOptions;
 use damage_twin::train::views::split_views;
 
@@ -63,6 +64,9 @@ struct Report {
     /// Per-class `iou`, `precision`, `recall`, `f1` on the held-out views.
     #[serde(flatten)]
     damage: Option<DamageFigures>,
+    /// Each held-out view's damage alone, with the ground sample distance at its damage.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    damage_views: Vec<ViewDamage>,
     /// `--half-appearance`: mean held-out PSNR of the right halves, light fitted on the left.
     #[serde(skip_serializing_if = "Option::is_none")]
     psnr_half_appearance: Option<f64>,
@@ -100,6 +104,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         damage_mode: scores.damage.as_ref().map(|_| readout.mode),
         damage_reference: scores.damage_reference,
         damage: scores.damage,
+        damage_views: scores.damage_views,
         psnr_half_appearance: scores.psnr_half_appearance,
     };
     if args.json {
@@ -130,6 +135,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 d.precision[class], d.recall[class], d.f1[class], d.reference_pixels[class]
             );
         }
+        print_damage_views(&report.damage_views);
     }
     Ok(())
+}
+
+/// One line per view: its ground sample distance at the damage and its own IoU per class (a thin
+/// crack's IoU falls as each pixel spans more of the wall, so views far from the wall score
+/// lower for the same model).
+fn print_damage_views(views: &[ViewDamage]) {
+    if views.len() < 2 {
+        return;
+    }
+    println!("  per view (IoU; ground sample distance at the view's damage):");
+    for v in views {
+        let gsd = v
+            .ground_sample_mm
+            .map_or_else(|| "   -   ".to_string(), |mm| format!("{mm:5.1} mm"));
+        let ious: Vec<String> = v
+            .figures
+            .iou
+            .iter()
+            .map(|(class, iou)| format!("{class} {iou:.3}"))
+            .collect();
+        println!("    {:<20} {gsd}/px  {}", v.name, ious.join("  "));
+    }
 }

@@ -10,8 +10,9 @@ use glam::Vec3;
 use serde::Serialize;
 
 use crate::damage::TrainMode;
-use crate::damage::evaluate::{DamageFigures, DamageReadout, evaluate_damage};
+use crate::damage::evaluate::{DamageFigures, DamageReadout};
 use crate::damage::reference::{load_reference_views, reference_source};
+use crate::damage::view_damage::{ViewDamage, evaluate_damage_by_view};
 use crate::raster::{Rasterizer, RenderOutput, RenderSettings};
 use crate::scene::{Dataset, ImageScale, SceneError};
 use crate::splats::Splats;
@@ -58,6 +59,9 @@ pub struct ModelScores {
     pub psnr_half_appearance: Option<f64>,
     /// Rendered damage against the reference masks (None without masks, or in RGB mode).
     pub damage: Option<DamageFigures>,
+    /// Each view's damage alone, with the ground sample distance at its damage (empty without
+    /// masks).
+    pub damage_views: Vec<ViewDamage>,
     /// The folder the reference masks came from.
     pub damage_reference: Option<String>,
 }
@@ -102,8 +106,10 @@ pub fn evaluate_model(
         && let Some(source) = reference_source(dataset)
     {
         let views = load_reference_views(dataset, &source, &request.indices, request.scale)?;
-        let damage = evaluate_damage(splats, &views, &request.readout, request.background);
+        let (damage, per_view) =
+            evaluate_damage_by_view(splats, &views, &request.readout, request.background);
         scores.damage = Some(damage.figures());
+        scores.damage_views = per_view;
         scores.damage_reference = Some(source.masks().describe());
     }
     Ok(scores)

@@ -24,6 +24,7 @@ mod refine_selection;
 pub mod select;
 pub mod setup;
 pub mod truth_hulls;
+pub mod view_damage;
 
 // The classes live beneath `scene` (mask folders and PLY properties are named by them).
 pub use crate::scene::damage_class::{DamageClass, NEW_DAMAGE_COLOUR};

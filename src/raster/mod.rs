@@ -70,7 +70,7 @@ pub struct RenderSettings {
     pub sh_direction_grad: bool,
     /// Gaussians whose camera-space depth is not above this are culled ([`NEAR_PLANE`] by
     /// default). A later survey's renders of the twin raise it to the view's floater clearance
-    /// (`timeline::changes::leaving_out_near_floaters`): that culls exactly the near floaters,
+    /// (`timeline::near_floaters::leaving_out_near_floaters`): that culls exactly the near floaters,
     /// bit for bit the render of the twin without them, and copies nothing. The GPU renderer
     /// keeps [`NEAR_PLANE`].
     pub near_plane: f32,

@@ -262,7 +262,7 @@ fn project_geometry(
 
 /// Each Gaussian's camera-space depth from `camera` as the projection computes it (the
 /// operations of `camera_space`, in its order), so the bits are those the near plane culls on:
-/// a cull decided on these depths (`timeline::changes::near_floaters`) and one by
+/// a cull decided on these depths (`timeline::near_floaters::near_floaters`) and one by
 /// `RenderSettings::near_plane` agree exactly.
 pub fn camera_depths(splats: &Splats, camera: &Camera) -> Vec<f32> {
     let frame = CameraFrame::new(camera, &RenderSettings::default());

@@ -458,7 +458,7 @@ const CLEARED_OPACITY: f32 = 1e-4;
 const FLOATER_DAMAGE_WEIGHT: f32 = 1.0;
 
 /// Clears (opacity to `CLEARED_OPACITY`) every Gaussian of `model` that is a near floater
-/// (`changes::near_floaters`) of one of `views`' cameras and covers that view's damage masks.
+/// (`near_floaters::near_floaters`) of one of `views`' cameras and covers that view's damage masks.
 /// A later survey flies where the earlier one did not: on the demo building survey 2 flies
 /// twice as high, and one opaque 4 m floater that survey 1 left there sat in front of survey
 /// 2's cameras. Outside the selection it stays frozen, so the update can neither remove it nor
