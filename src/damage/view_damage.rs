@@ -3,7 +3,7 @@
 //! A thin crack's IoU depends on how many pixels wide it is: a one-pixel fringe costs a crack two
 //! pixels wide half its IoU and one ten pixels wide a tenth. So a held-out figure means little
 //! without the millimetres of wall each pixel covers. Survey 1's refined demo twin reads crack IoU
-//! 0.79 on its near held-out views (about 12 mm a pixel) and 0.58 on its far ones (17–20 mm).
+//! 0.79 on its near held-out views (about 12 mm a pixel) and 0.58 on its far ones (15–21 mm).
 //! `eval` prints both per view, so two surveys flown at different distances compare at the same
 //! ground sample distance.
 
