@@ -5,8 +5,6 @@
 //! caller's (detection and the update's light fit and seeds leave them out of their renders, the
 //! update clears those over damage).
 
-use std::borrow::Cow;
-
 use crate::raster::{RenderSettings, camera_depths};
 use crate::scene::Camera;
 use crate::splats::Splats;
@@ -42,19 +40,6 @@ pub fn leaving_out_near_floaters(
     seen
 }
 
-/// The twin without its near floaters in front of `camera` (`near_floaters`), as a copy: the
-/// plain reference of `leaving_out_near_floaters`, which renders the same without copying.
-pub fn without_near_floaters<'a>(twin: &'a Splats, camera: &Camera) -> Cow<'a, Splats> {
-    let floaters = near_floaters(twin, camera);
-    if !floaters.iter().any(|&f| f) {
-        return Cow::Borrowed(twin);
-    }
-    let keep: Vec<bool> = floaters.iter().map(|&f| !f).collect();
-    let mut seen = twin.clone();
-    seen.retain(&keep);
-    Cow::Owned(seen)
-}
-
 /// Per Gaussian, whether it is a floater in front of `camera` (see
 /// `leaving_out_near_floaters`): the one definition of a near floater.
 pub(crate) fn near_floaters(twin: &Splats, camera: &Camera) -> Vec<bool> {
@@ -80,8 +65,23 @@ fn floater_clearance(depths: &[f32]) -> Option<f32> {
 
 #[cfg(test)]
 mod tests {
+    use std::borrow::Cow;
+
     use super::*;
     use crate::raster::{RenderOutput, render};
+
+    /// The twin without its near floaters in front of `camera` (`near_floaters`), as a copy: the
+    /// plain reference of `leaving_out_near_floaters`, which renders the same without copying.
+    fn without_near_floaters<'a>(twin: &'a Splats, camera: &Camera) -> Cow<'a, Splats> {
+        let floaters = near_floaters(twin, camera);
+        if !floaters.iter().any(|&f| f) {
+            return Cow::Borrowed(twin);
+        }
+        let keep: Vec<bool> = floaters.iter().map(|&f| !f).collect();
+        let mut seen = twin.clone();
+        seen.retain(&keep);
+        Cow::Owned(seen)
+    }
 
     fn camera(rotation: glam::Quat, translation: glam::Vec3) -> Camera {
         let k = crate::scene::Intrinsics {
